@@ -1,0 +1,15 @@
+// Each component registers its subcommands of `perch` here. `bench` is the `perch bench`
+// subcommand; components add their benchmarks under it (perch bench env, perch bench ppo, ...).
+// A subcommand that measures something has --json.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+namespace perch {
+
+void RegisterEnvCommands(CLI::App& root, CLI::App& bench);      // app/cmd_env.cc
+void RegisterMotionCommands(CLI::App& root, CLI::App& bench);   // app/cmd_motion.cc
+void RegisterLearnerCommands(CLI::App& root, CLI::App& bench);  // app/cmd_ppo.cc
+void RegisterClusterCommands(CLI::App& root, CLI::App& bench);  // app/cmd_cluster.cc
+
+}  // namespace perch

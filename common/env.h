@@ -1,0 +1,52 @@
+// The environment interface the actor loop sees. It knows nothing about humanoids or Bullet:
+// an env publishes a static spec and implements Reset/Step on flat float arrays.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace perch {
+
+// A named contiguous range of the observation vector, e.g. {"joint_angles", 7, 21}.
+struct ObsSlice {
+  std::string name;
+  int offset = 0;
+  int size = 0;
+};
+
+struct EnvSpec {
+  std::string name;
+  int obs_dim = 0;                 // length of the observation vector
+  int act_dim = 0;                 // length of the action vector
+  std::vector<float> obs_low;      // [obs_dim] bounds observations are clipped to
+  std::vector<float> obs_high;     // [obs_dim]
+  std::vector<float> act_low;      // [act_dim] the env clips actions to these
+  std::vector<float> act_high;     // [act_dim]
+  std::vector<ObsSlice> obs_slices;  // which slices are which
+  double control_dt = 1.0 / 60.0;  // seconds per Step()
+  int max_episode_steps = 1000;    // truncation limit, in Step() calls
+};
+
+// Result of one Step(). `terminated` (e.g. fell) and `truncated` (time limit) are distinct:
+// PPO bootstraps on truncation, not on termination.
+struct StepResult {
+  float reward = 0.0f;
+  bool terminated = false;
+  bool truncated = false;
+  bool invalid = false;  // NaN/Inf or exploding state detected; also sets terminated
+};
+
+class Env {
+ public:
+  virtual ~Env() = default;
+  virtual const EnvSpec& spec() const = 0;
+  // Reseeds the env's RNG; the next Reset() starts a new reproducible stream.
+  virtual void Seed(uint64_t seed) = 0;
+  // Starts an episode and writes the first observation into obs[spec().obs_dim].
+  virtual void Reset(float* obs) = 0;
+  // Applies action[spec().act_dim] for one control step and writes the next observation.
+  virtual StepResult Step(const float* action, float* obs) = 0;
+};
+
+}  // namespace perch

@@ -1,0 +1,57 @@
+#include "common/json_util.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+namespace perch {
+
+Json LoadJsonFile(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw ConfigError(path + ": cannot open file");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  try {
+    return Json::parse(ss.str());
+  } catch (const nlohmann::json::parse_error& e) {
+    throw ConfigError(path + ": malformed JSON: " + e.what());
+  }
+}
+
+void SaveJsonFileAtomic(const std::string& path, const Json& j) {
+  const std::string tmp = path + ".tmp";
+  const std::string text = j.dump(2) + "\n";
+  int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  if (fd < 0) throw ConfigError(tmp + ": cannot create file");
+  size_t off = 0;
+  while (off < text.size()) {
+    ssize_t n = ::write(fd, text.data() + off, text.size() - off);
+    if (n <= 0) {
+      ::close(fd);
+      ::unlink(tmp.c_str());
+      throw ConfigError(tmp + ": write failed");
+    }
+    off += static_cast<size_t>(n);
+  }
+  ::fsync(fd);
+  ::close(fd);
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    ::unlink(tmp.c_str());
+    throw ConfigError(path + ": rename failed");
+  }
+}
+
+void CheckKnownKeys(const Json& j, std::initializer_list<const char*> known,
+                    const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected an object, got " + j.dump());
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    bool ok = false;
+    for (const char* k : known) ok = ok || it.key() == k;
+    if (!ok) throw ConfigError(ctx + ": unknown field '" + it.key() + "'");
+  }
+}
+
+}  // namespace perch
