@@ -12,7 +12,9 @@ TEST(Rng, SameSeedSameStreamOtherSeedDiffers) {
   for (int i = 0; i < 100; ++i) {
     const uint64_t x = a.NextU64();
     EXPECT_EQ(x, b.NextU64());
-    if (i == 0) EXPECT_NE(x, c.NextU64());
+    if (i == 0) {
+      EXPECT_NE(x, c.NextU64());
+    }
   }
 }
 
