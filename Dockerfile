@@ -1,0 +1,21 @@
+# Perch image for the cluster (k8s/). Debian 12, built from this source tree.
+#   docker build -t perch:latest .
+FROM debian:12 AS build
+WORKDIR /src
+COPY scripts/install-deps.sh scripts/install-deps.sh
+RUN bash scripts/install-deps.sh && rm -rf /var/lib/apt/lists/*
+COPY . .
+RUN cmake -S . -B build -DCMAKE_BUILD_TYPE=Release && cmake --build build -j"$(nproc)" --target perch
+
+FROM debian:12
+RUN apt-get update -qq && apt-get install -y -qq --no-install-recommends \
+      libbullet3.24 libzmq5 libprotobuf32 libspdlog1.10 libfmt9 libpng16-16 \
+    && rm -rf /var/lib/apt/lists/*
+COPY --from=build /src/build/app/perch /usr/local/bin/perch
+COPY --from=build /src/data /opt/perch/data
+COPY --from=build /src/configs /opt/perch/configs
+WORKDIR /opt/perch
+# Data files (humanoid, chairs, motions) are found here when not running from a source tree.
+ENV PERCH_DATA_DIR=/opt/perch/data
+ENTRYPOINT []
+CMD ["perch", "--help"]
