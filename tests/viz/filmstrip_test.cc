@@ -1,0 +1,106 @@
+#include "viz/filmstrip.h"
+
+#include <cstdio>
+#include <string>
+
+#include <gtest/gtest.h>
+
+namespace perch {
+namespace {
+
+const Rgb kCentre{60, 60, 90};
+const Rgb kSeat{190, 145, 95};
+
+PoseFrame Standing(double x, double y) {
+  PoseFrame f;
+  f.root_pos = Eigen::Vector3d(x, y, 1.285);
+  f.q.assign(HumanoidModel::kNumJoints, 0.0);
+  // Knees must be inside their range (-160..-2 deg); a tiny bend keeps the pose legal.
+  return f;
+}
+
+// Pixel of a world point in panel k of a strip rendered with a fixed window (mirrors the
+// renderer's mapping: extent, centre, side-view ground 15% above the bottom).
+struct Mapper {
+  double scale, cx, cy_side, cy_top;
+  int px;
+  Eigen::Vector2i Side(int k, double x, double z) const {
+    return Eigen::Vector2i(static_cast<int>(k * px + px * 0.5 + (x - cx) * scale),
+                           static_cast<int>(px * 0.5 - (z - cy_side) * scale));
+  }
+  Eigen::Vector2i Top(int k, double x, double y) const {
+    return Eigen::Vector2i(static_cast<int>(k * px + px * 0.5 + (x - cx) * scale),
+                           static_cast<int>(px + 1 + px * 0.5 - (y - cy_top) * scale));
+  }
+};
+
+TEST(Filmstrip, StandingHumanoidIsDrawnWhereFkPutsIt) {
+  const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
+  FilmstripOptions opt;
+  opt.panel_px = 200;
+  opt.min_extent_m = 2.0;
+  opt.margin_m = 0.5;
+  const Canvas c =
+      RenderFilmstrip(model, nullptr, Eigen::Isometry3d::Identity(), {Standing(0, 0)}, opt);
+  ASSERT_EQ(c.width(), 200);
+  ASSERT_EQ(c.height(), 401);
+  const Mapper m{200 / 2.0, 0.0, 0.35 * 2.0, 0.0, 200};
+  // The head sphere (torso frame z = 0.19, r = 0.09) is torso-coloured in the side view...
+  const Eigen::Vector2i head = m.Side(0, 0.03, 1.285 + 0.19);
+  EXPECT_EQ(c.at(head.x(), head.y()), kCentre);
+  // ...and nothing is drawn 10 cm above the top of the head.
+  const Eigen::Vector2i above = m.Side(0, 0.03, 1.285 + 0.19 + 0.09 + 0.10);
+  EXPECT_FALSE(c.at(above.x(), above.y()) == kCentre);
+  // Top view: the torso is at the origin.
+  const Eigen::Vector2i torso = m.Top(0, 0.03, 0.03);
+  EXPECT_EQ(c.at(torso.x(), torso.y()), kCentre);
+}
+
+TEST(Filmstrip, ChairSeatVisibleAndFramesPicked) {
+  const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
+  const Chair chair = Chair::Load(Chair::PresetPath("authors"));
+  std::vector<PoseFrame> all;
+  for (int i = 0; i < 10; ++i) all.push_back(Standing(1.0 + 0.1 * i, 0.0));
+  const std::vector<PoseFrame> picked = PickFrames(all, 3);
+  ASSERT_EQ(picked.size(), 3u);
+  EXPECT_DOUBLE_EQ(picked.front().root_pos.x(), 1.0);
+  EXPECT_DOUBLE_EQ(picked.back().root_pos.x(), 1.9);
+  FilmstripOptions opt;
+  opt.panel_px = 200;
+  const Canvas c = RenderFilmstrip(model, &chair, Eigen::Isometry3d::Identity(), picked, opt);
+  EXPECT_EQ(c.width(), 600);
+  // Window: roots x in [1.0, 1.9] and the chair at 0 -> lo 0, hi 1.9; extent = 1.9 + 1.2 = 3.1.
+  const double extent = 3.1;
+  const Mapper m{200 / extent, 0.95, 0.35 * extent, 0.0, 200};
+  const Eigen::Vector2i seat = m.Top(1, 0.05, 0.05);  // seat top seen from above, panel 1
+  EXPECT_EQ(c.at(seat.x(), seat.y()), kSeat);
+}
+
+TEST(Canvas, PngRoundTripAndFailedSaveLeavesNothing) {
+  Canvas c(17, 9, Rgb{1, 2, 3});
+  c.FillCapsule(Eigen::Vector2d(2, 2), Eigen::Vector2d(14, 6), 2.0, Rgb{200, 100, 50});
+  const std::string path = std::string(::testing::TempDir()) + "strip.png";
+  c.SavePng(path);
+  const Canvas back = Canvas::LoadPng(path);
+  ASSERT_EQ(back.width(), 17);
+  ASSERT_EQ(back.height(), 9);
+  for (int y = 0; y < 9; ++y)
+    for (int x = 0; x < 17; ++x) ASSERT_EQ(back.at(x, y), c.at(x, y));
+  EXPECT_THROW(c.SavePng("/nonexistent_perch_dir/x.png"), std::runtime_error);
+  std::FILE* f = std::fopen("/nonexistent_perch_dir/x.png.tmp", "rb");
+  EXPECT_EQ(f, nullptr);
+  // A file that is not a PNG is refused by name.
+  const std::string bad = std::string(::testing::TempDir()) + "bad.png";
+  std::FILE* w = std::fopen(bad.c_str(), "wb");
+  std::fputs("not a png", w);
+  std::fclose(w);
+  try {
+    Canvas::LoadPng(bad);
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(bad), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace perch

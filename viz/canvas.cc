@@ -1,0 +1,167 @@
+#include "viz/canvas.h"
+
+#include <png.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+
+namespace perch {
+
+Canvas::Canvas(int width, int height, Rgb background)
+    : width_(width), height_(height), pixels_(static_cast<size_t>(width) * height, background) {
+  if (width <= 0 || height <= 0) throw std::runtime_error("Canvas: size must be positive");
+}
+
+void Canvas::Set(int x, int y, Rgb c) {
+  if (x < 0 || y < 0 || x >= width_ || y >= height_) return;
+  pixels_[static_cast<size_t>(y) * width_ + x] = c;
+}
+
+void Canvas::FillCapsule(const Eigen::Vector2d& a, const Eigen::Vector2d& b, double radius,
+                         Rgb c) {
+  const int x0 = std::max(0, static_cast<int>(std::floor(std::min(a.x(), b.x()) - radius)));
+  const int x1 = std::min(width_ - 1, static_cast<int>(std::ceil(std::max(a.x(), b.x()) + radius)));
+  const int y0 = std::max(0, static_cast<int>(std::floor(std::min(a.y(), b.y()) - radius)));
+  const int y1 =
+      std::min(height_ - 1, static_cast<int>(std::ceil(std::max(a.y(), b.y()) + radius)));
+  const Eigen::Vector2d ab = b - a;
+  const double len2 = ab.squaredNorm();
+  const double r2 = radius * radius;
+  for (int y = y0; y <= y1; ++y) {
+    for (int x = x0; x <= x1; ++x) {
+      const Eigen::Vector2d p(x + 0.5, y + 0.5);
+      double t = len2 > 0 ? (p - a).dot(ab) / len2 : 0.0;
+      t = std::clamp(t, 0.0, 1.0);
+      if ((p - (a + t * ab)).squaredNorm() <= r2) Set(x, y, c);
+    }
+  }
+}
+
+void Canvas::FillConvexHull(const std::vector<Eigen::Vector2d>& points, Rgb c) {
+  if (points.empty()) return;
+  // Andrew's monotone chain.
+  std::vector<Eigen::Vector2d> p = points;
+  std::sort(p.begin(), p.end(), [](const Eigen::Vector2d& u, const Eigen::Vector2d& v) {
+    return u.x() < v.x() || (u.x() == v.x() && u.y() < v.y());
+  });
+  auto cross = [](const Eigen::Vector2d& o, const Eigen::Vector2d& u, const Eigen::Vector2d& v) {
+    return (u.x() - o.x()) * (v.y() - o.y()) - (u.y() - o.y()) * (v.x() - o.x());
+  };
+  std::vector<Eigen::Vector2d> hull(2 * p.size());
+  size_t k = 0;
+  for (size_t i = 0; i < p.size(); ++i) {
+    while (k >= 2 && cross(hull[k - 2], hull[k - 1], p[i]) <= 0) --k;
+    hull[k++] = p[i];
+  }
+  for (size_t i = p.size() - 1, t = k + 1; i > 0; --i) {
+    while (k >= t && cross(hull[k - 2], hull[k - 1], p[i - 1]) <= 0) --k;
+    hull[k++] = p[i - 1];
+  }
+  hull.resize(k > 1 ? k - 1 : k);
+  double ymin = hull[0].y(), ymax = hull[0].y();
+  for (const auto& h : hull) {
+    ymin = std::min(ymin, h.y());
+    ymax = std::max(ymax, h.y());
+  }
+  const int y0 = std::max(0, static_cast<int>(std::floor(ymin)));
+  const int y1 = std::min(height_ - 1, static_cast<int>(std::ceil(ymax)));
+  for (int y = y0; y <= y1; ++y) {
+    const double yc = y + 0.5;
+    double xl = 1e30, xr = -1e30;
+    for (size_t i = 0; i < hull.size(); ++i) {
+      const Eigen::Vector2d& u = hull[i];
+      const Eigen::Vector2d& v = hull[(i + 1) % hull.size()];
+      if ((u.y() <= yc && v.y() >= yc) || (v.y() <= yc && u.y() >= yc)) {
+        const double dy = v.y() - u.y();
+        const double x = std::abs(dy) < 1e-12 ? std::min(u.x(), v.x())
+                                               : u.x() + (yc - u.y()) / dy * (v.x() - u.x());
+        const double x2 = std::abs(dy) < 1e-12 ? std::max(u.x(), v.x()) : x;
+        xl = std::min(xl, std::min(x, x2));
+        xr = std::max(xr, std::max(x, x2));
+      }
+    }
+    if (xl > xr) continue;
+    for (int x = std::max(0, static_cast<int>(std::floor(xl)));
+         x <= std::min(width_ - 1, static_cast<int>(std::ceil(xr))); ++x) {
+      if (x + 0.5 >= xl && x + 0.5 <= xr) Set(x, y, c);
+    }
+  }
+}
+
+void Canvas::FillRect(int x0, int y0, int x1, int y1, Rgb c) {
+  for (int y = std::max(0, y0); y <= std::min(height_ - 1, y1); ++y)
+    for (int x = std::max(0, x0); x <= std::min(width_ - 1, x1); ++x) Set(x, y, c);
+}
+
+void Canvas::Blit(const Canvas& other, int x, int y) {
+  for (int j = 0; j < other.height(); ++j)
+    for (int i = 0; i < other.width(); ++i) Set(x + i, y + j, other.at(i, j));
+}
+
+void Canvas::SavePng(const std::string& path) const {
+  const std::string tmp = path + ".tmp";
+  FILE* f = std::fopen(tmp.c_str(), "wb");
+  if (!f) throw std::runtime_error(path + ": cannot write PNG");
+  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+  png_infop info = png ? png_create_info_struct(png) : nullptr;
+  if (!png || !info || setjmp(png_jmpbuf(png))) {
+    png_destroy_write_struct(&png, &info);
+    std::fclose(f);
+    std::remove(tmp.c_str());
+    throw std::runtime_error(path + ": PNG encoding failed");
+  }
+  png_init_io(png, f);
+  png_set_IHDR(png, info, width_, height_, 8, PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE,
+               PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+  png_write_info(png, info);
+  std::vector<uint8_t> row(static_cast<size_t>(width_) * 3);
+  for (int y = 0; y < height_; ++y) {
+    for (int x = 0; x < width_; ++x) {
+      const Rgb c = at(x, y);
+      row[3 * x] = c.r;
+      row[3 * x + 1] = c.g;
+      row[3 * x + 2] = c.b;
+    }
+    png_write_row(png, row.data());
+  }
+  png_write_end(png, nullptr);
+  png_destroy_write_struct(&png, &info);
+  if (std::fclose(f) != 0 || std::rename(tmp.c_str(), path.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    throw std::runtime_error(path + ": cannot write PNG");
+  }
+}
+
+Canvas Canvas::LoadPng(const std::string& path) {
+  FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) throw std::runtime_error(path + ": cannot open PNG");
+  png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+  png_infop info = png ? png_create_info_struct(png) : nullptr;
+  if (!png || !info || setjmp(png_jmpbuf(png))) {
+    png_destroy_read_struct(&png, &info, nullptr);
+    std::fclose(f);
+    throw std::runtime_error(path + ": not a readable PNG");
+  }
+  png_init_io(png, f);
+  png_read_info(png, info);
+  const int w = png_get_image_width(png, info);
+  const int h = png_get_image_height(png, info);
+  if (png_get_color_type(png, info) != PNG_COLOR_TYPE_RGB || png_get_bit_depth(png, info) != 8) {
+    png_destroy_read_struct(&png, &info, nullptr);
+    std::fclose(f);
+    throw std::runtime_error(path + ": only 8-bit RGB PNG is supported");
+  }
+  Canvas c(w, h, Rgb{});
+  std::vector<uint8_t> row(static_cast<size_t>(w) * 3);
+  for (int y = 0; y < h; ++y) {
+    png_read_row(png, row.data(), nullptr);
+    for (int x = 0; x < w; ++x) c.Set(x, y, Rgb{row[3 * x], row[3 * x + 1], row[3 * x + 2]});
+  }
+  png_destroy_read_struct(&png, &info, nullptr);
+  std::fclose(f);
+  return c;
+}
+
+}  // namespace perch

@@ -1,0 +1,186 @@
+#include "viz/filmstrip.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace perch {
+namespace {
+
+const Rgb kBackground{250, 250, 247};
+const Rgb kGround{200, 200, 195};
+const Rgb kGrid{228, 228, 222};
+const Rgb kSeparator{120, 120, 120};
+const Rgb kCentre{60, 60, 90};
+const Rgb kRight{200, 70, 60};
+const Rgb kLeft{70, 110, 200};
+const Rgb kChair{150, 110, 70};
+const Rgb kSeat{190, 145, 95};
+const Rgb kTarget{30, 160, 60};
+
+// A drawable item with a depth for painter's ordering (larger depth is drawn first).
+struct Item {
+  double depth;
+  bool is_box;
+  Eigen::Vector3d a, b;  // capsule ends (world)
+  double radius;
+  std::vector<Eigen::Vector3d> corners;  // box corners (world)
+  Rgb color;
+};
+
+Rgb BodyColor(const std::string& name) {
+  if (name.rfind("right_", 0) == 0) return kRight;
+  if (name.rfind("left_", 0) == 0) return kLeft;
+  return kCentre;
+}
+
+struct View {
+  // Maps world to pixels: side view uses (x, z), top view uses (x, y).
+  bool top;
+  double cx, cy;  // world centre of the panel (x and z or y) [m]
+  double scale;   // px per m
+  int px;
+  Eigen::Vector2d Map(const Eigen::Vector3d& w) const {
+    const double u = w.x();
+    const double v = top ? w.y() : w.z();
+    return Eigen::Vector2d(px * 0.5 + (u - cx) * scale, px * 0.5 - (v - cy) * scale);
+  }
+};
+
+void DrawPanel(Canvas& panel, const View& view, const std::vector<Item>& items_in,
+               const std::vector<Eigen::Vector2d>& targets) {
+  // Grid every 0.5 m, then the ground line in the side view.
+  const double half = panel.width() * 0.5 / view.scale;
+  for (double g = std::floor((view.cx - half) * 2) / 2; g <= view.cx + half; g += 0.5) {
+    const Eigen::Vector2d p = view.Map(Eigen::Vector3d(g, 0, 0));
+    panel.FillRect(static_cast<int>(p.x()), 0, static_cast<int>(p.x()), panel.height() - 1, kGrid);
+  }
+  if (view.top) {
+    for (double g = std::floor((view.cy - half) * 2) / 2; g <= view.cy + half; g += 0.5) {
+      const Eigen::Vector2d p = view.Map(Eigen::Vector3d(0, g, 0));
+      panel.FillRect(0, static_cast<int>(p.y()), panel.width() - 1, static_cast<int>(p.y()), kGrid);
+    }
+  } else {
+    const Eigen::Vector2d p = view.Map(Eigen::Vector3d(0, 0, 0));
+    panel.FillRect(0, static_cast<int>(p.y()), panel.width() - 1, panel.height() - 1, kGround);
+  }
+  std::vector<Item> items = items_in;
+  std::stable_sort(items.begin(), items.end(),
+                   [](const Item& x, const Item& y) { return x.depth > y.depth; });
+  for (const Item& it : items) {
+    if (it.is_box) {
+      std::vector<Eigen::Vector2d> pts;
+      for (const auto& c : it.corners) pts.push_back(view.Map(c));
+      panel.FillConvexHull(pts, it.color);
+    } else {
+      panel.FillCapsule(view.Map(it.a), view.Map(it.b), std::max(1.0, it.radius * view.scale),
+                        it.color);
+    }
+  }
+  if (view.top) {
+    for (const auto& t : targets) {
+      const Eigen::Vector2d p = view.Map(Eigen::Vector3d(t.x(), t.y(), 0));
+      panel.FillCapsule(p + Eigen::Vector2d(-5, -5), p + Eigen::Vector2d(5, 5), 1.5, kTarget);
+      panel.FillCapsule(p + Eigen::Vector2d(-5, 5), p + Eigen::Vector2d(5, -5), 1.5, kTarget);
+    }
+  }
+}
+
+}  // namespace
+
+std::vector<PoseFrame> PickFrames(const std::vector<PoseFrame>& all, int count) {
+  std::vector<PoseFrame> out;
+  if (all.empty() || count <= 0) return out;
+  if (count == 1 || all.size() == 1) return {all.front()};
+  for (int i = 0; i < count; ++i) {
+    const size_t idx = static_cast<size_t>(
+        std::llround(static_cast<double>(i) * (all.size() - 1) / (count - 1)));
+    out.push_back(all[idx]);
+  }
+  return out;
+}
+
+Canvas RenderFilmstrip(const HumanoidModel& model, const Chair* chair,
+                       const Eigen::Isometry3d& chair_pose, const std::vector<PoseFrame>& frames,
+                       const FilmstripOptions& options) {
+  if (frames.empty()) throw std::runtime_error("RenderFilmstrip: no frames");
+  const int px = options.panel_px;
+  // Chair items are the same in every frame.
+  std::vector<Item> chair_items;
+  if (chair) {
+    for (size_t i = 0; i < chair->boxes.size(); ++i) {
+      const ChairBox& b = chair->boxes[i];
+      Item it{};
+      it.is_box = true;
+      for (int c = 0; c < 8; ++c) {
+        const Eigen::Vector3d local((c & 1) ? b.max.x() : b.min.x(), (c & 2) ? b.max.y() : b.min.y(),
+                                    (c & 4) ? b.max.z() : b.min.z());
+        it.corners.push_back(chair_pose * local);
+      }
+      it.color = static_cast<int>(i) == chair->seat_box ? kSeat : kChair;
+      chair_items.push_back(it);
+    }
+  }
+  // One fixed window over all roots and the chair, unless following.
+  Eigen::Vector2d lo(1e9, 1e9), hi(-1e9, -1e9);
+  for (const auto& f : frames) {
+    lo = lo.cwiseMin(f.root_pos.head<2>());
+    hi = hi.cwiseMax(f.root_pos.head<2>());
+  }
+  if (chair) {
+    lo = lo.cwiseMin(chair_pose.translation().head<2>());
+    hi = hi.cwiseMax(chair_pose.translation().head<2>());
+  }
+  const double extent =
+      std::max(options.min_extent_m, (hi - lo).maxCoeff() + 2.0 * options.margin_m);
+  const double scale = px / extent;
+  const Eigen::Vector2d centre = 0.5 * (lo + hi);
+
+  Canvas strip(px * static_cast<int>(frames.size()), 2 * px + 1, kBackground);
+  for (size_t k = 0; k < frames.size(); ++k) {
+    const PoseFrame& f = frames[k];
+    if (static_cast<int>(f.q.size()) != model.num_joints())
+      throw std::runtime_error("RenderFilmstrip: frame has wrong number of joint angles");
+    const FkResult fk = ForwardKinematics(model, f.root_pos, f.root_quat, f.q.data());
+    std::vector<Item> side = chair_items, top = chair_items;
+    for (auto& it : side) {
+      double y = 0;
+      for (const auto& c : it.corners) y += c.y() / 8;
+      it.depth = y;
+    }
+    for (auto& it : top) {
+      double z = 0;
+      for (const auto& c : it.corners) z = std::max(z, c.z());
+      it.depth = -z;
+    }
+    for (int bi = 0; bi < model.num_bodies(); ++bi) {
+      const Body& body = model.body(bi);
+      for (const Geom& g : body.geoms) {
+        Item it{};
+        it.is_box = false;
+        it.a = fk.body_world[bi] * g.from;
+        it.b = fk.body_world[bi] * g.to;
+        it.radius = g.radius;
+        it.color = BodyColor(body.name);
+        it.depth = 0.5 * (it.a.y() + it.b.y());
+        side.push_back(it);
+        it.depth = -0.5 * (it.a.z() + it.b.z()) - g.radius;
+        top.push_back(it);
+      }
+    }
+    const Eigen::Vector2d c = options.follow ? Eigen::Vector2d(f.root_pos.head<2>()) : centre;
+    Canvas side_panel(px, px, kBackground), top_panel(px, px, kBackground);
+    // Side view: the ground line 15% of the panel above its bottom edge.
+    const View sv{false, c.x(), 0.35 * extent, scale, px};
+    View tv{true, c.x(), c.y(), scale, px};
+    DrawPanel(side_panel, sv, side, {});
+    DrawPanel(top_panel, tv, top, options.targets);
+    strip.Blit(side_panel, static_cast<int>(k) * px, 0);
+    strip.Blit(top_panel, static_cast<int>(k) * px, px + 1);
+    if (k > 0) strip.FillRect(static_cast<int>(k) * px, 0, static_cast<int>(k) * px, 2 * px, kSeparator);
+  }
+  strip.FillRect(0, px, strip.width() - 1, px, kSeparator);
+  return strip;
+}
+
+}  // namespace perch

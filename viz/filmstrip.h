@@ -1,0 +1,40 @@
+// Draws a few frames of an episode as a filmstrip PNG, side view (x right, z up) above top view
+// (x right, y up), with the humanoid's capsules, the chair's boxes and walk targets, so a person can
+// see a gait or a sit without a 3D viewer. Pure C++ (FK from the model), no Bullet.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "envs/chair.h"
+#include "envs/humanoid_model.h"
+#include "viz/canvas.h"
+
+namespace perch {
+
+struct PoseFrame {
+  Eigen::Vector3d root_pos = Eigen::Vector3d::Zero();  // torso body origin, world [m]
+  Eigen::Quaterniond root_quat = Eigen::Quaterniond::Identity();
+  std::vector<double> q;  // [21] joint angles, observation order [rad]
+  double time_s = 0.0;
+};
+
+struct FilmstripOptions {
+  int panel_px = 220;          // each panel is panel_px x panel_px
+  double margin_m = 0.6;       // world margin around the humanoid and chair [m]
+  double min_extent_m = 2.2;   // smallest world width a panel shows [m]
+  bool follow = false;         // centre each panel on its frame's root instead of one fixed window
+  std::vector<Eigen::Vector2d> targets;  // walk targets to mark in the top view, world xy [m]
+};
+
+// The chair is drawn when `chair` is not null, at `chair_pose` (chair frame -> world).
+Canvas RenderFilmstrip(const HumanoidModel& model, const Chair* chair,
+                       const Eigen::Isometry3d& chair_pose, const std::vector<PoseFrame>& frames,
+                       const FilmstripOptions& options = {});
+
+// Picks `count` frames evenly spaced over `all` (first and last included).
+std::vector<PoseFrame> PickFrames(const std::vector<PoseFrame>& all, int count);
+
+}  // namespace perch
