@@ -11,5 +11,6 @@ void RegisterEnvCommands(CLI::App& root, CLI::App& bench);      // app/cmd_env.c
 void RegisterMotionCommands(CLI::App& root, CLI::App& bench);   // app/cmd_motion.cc
 void RegisterLearnerCommands(CLI::App& root, CLI::App& bench);  // app/cmd_ppo.cc
 void RegisterClusterCommands(CLI::App& root, CLI::App& bench);  // app/cmd_cluster.cc
+void RegisterVizCommands(CLI::App& root, CLI::App& bench);      // app/cmd_viz.cc
 
 }  // namespace perch

@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
   perch::RegisterMotionCommands(app, *bench);
   perch::RegisterLearnerCommands(app, *bench);
   perch::RegisterClusterCommands(app, *bench);
+  perch::RegisterVizCommands(app, *bench);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
