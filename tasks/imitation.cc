@@ -1,0 +1,81 @@
+#include "tasks/imitation.h"
+
+#include <cmath>
+
+namespace perch {
+
+SimilarityRewardConfig SimilarityRewardConfig::FromJson(const Json& j, const std::string& ctx) {
+  SimilarityRewardConfig c;
+  CheckKnownKeys(j, {"w_pose", "w_vel", "alpha_pose", "alpha_vel", "finite_difference_velocities"},
+                 ctx);
+  GetOptional(j, "w_pose", c.w_pose, ctx);
+  GetOptional(j, "w_vel", c.w_vel, ctx);
+  GetOptional(j, "alpha_pose", c.alpha_pose, ctx);
+  GetOptional(j, "alpha_vel", c.alpha_vel, ctx);
+  GetOptional(j, "finite_difference_velocities", c.finite_difference_velocities, ctx);
+  return c;
+}
+
+Json SimilarityRewardConfig::ToJson() const {
+  return Json{{"w_pose", w_pose},
+              {"w_vel", w_vel},
+              {"alpha_pose", alpha_pose},
+              {"alpha_vel", alpha_vel},
+              {"finite_difference_velocities", finite_difference_velocities}};
+}
+
+double AngleDiff(double a, double b) {
+  double d = std::fmod(a - b + M_PI, 2.0 * M_PI);
+  if (d < 0) d += 2.0 * M_PI;
+  return d - M_PI;
+}
+
+double PoseReward(const double* q, const double* q_ref, int n, double alpha_pose) {
+  double s = 0.0;
+  for (int j = 0; j < n; ++j) {
+    const double d = AngleDiff(q[j], q_ref[j]);
+    s += d * d;
+  }
+  return std::exp(-alpha_pose * s);
+}
+
+double JointVelocityReward(const double* qdot, const double* qdot_ref, int n, double alpha_vel) {
+  double s = 0.0;
+  for (int j = 0; j < n; ++j) {
+    const double d = qdot[j] - qdot_ref[j];
+    s += d * d;
+  }
+  return std::exp(-alpha_vel * s);
+}
+
+double SimilarityReward(const SimilarityRewardConfig& c, const double* q, const double* q_ref,
+                        const double* qdot, const double* qdot_ref, int n) {
+  return c.w_pose * PoseReward(q, q_ref, n, c.alpha_pose) +
+         c.w_vel * JointVelocityReward(qdot, qdot_ref, n, c.alpha_vel);
+}
+
+double RootVelocityReward(const double* v, const double* v_ref, double w, double alpha) {
+  double s = 0.0;
+  for (int i = 0; i < 3; ++i) s += (v[i] - v_ref[i]) * (v[i] - v_ref[i]);
+  return w * std::exp(-alpha * s);
+}
+
+double TargetProgressReward(double d_now, double d_next, double dt, double w, double k) {
+  const double v = (d_next - d_now) / dt;
+  return w / (1.0 + std::exp(k * v));
+}
+
+double RootRotationReward(const double* rpy, const double* rpy_ref, double w, double alpha) {
+  double s = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    const double d = AngleDiff(rpy[i], rpy_ref[i]);
+    s += d * d;
+  }
+  return w * std::exp(-alpha * s);
+}
+
+double ApproachReward(double d_now, double d_next, double dt, double w) {
+  return w * (-(d_next - d_now) / dt);
+}
+
+}  // namespace perch
