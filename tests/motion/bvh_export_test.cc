@@ -1,0 +1,43 @@
+#include "motion/bvh_export.h"
+
+#include <gtest/gtest.h>
+
+#include "common/rng.h"
+
+namespace perch {
+namespace {
+
+TEST(BvhExport, ExportedBvhReproducesTheHumanoidBodies) {
+  const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
+  Rng rng(13);
+  std::vector<MotionPose> frames;
+  for (int i = 0; i < 4; ++i) {
+    MotionPose p;
+    p.root_pos = Eigen::Vector3d(rng.Uniform(-1, 1), rng.Uniform(-1, 1), rng.Uniform(0.5, 1.3));
+    p.root_rot = Eigen::Quaterniond(
+        Eigen::AngleAxisd(rng.Uniform(-3, 3),
+                          Eigen::Vector3d(rng.Normal(), rng.Normal(), rng.Normal()).normalized()));
+    p.q.resize(21);
+    for (int j = 0; j < 21; ++j) p.q[j] = rng.Uniform(model.joint(j).lower, model.joint(j).upper);
+    frames.push_back(p);
+  }
+  const ReferenceMotion m("x", 0.1, frames, false);
+  const BvhClip written = HumanoidMotionToBvh(model, m, 0.1, 0.0);
+  // Through text and back: the BVH's forward kinematics puts every body where the humanoid's does.
+  const BvhClip clip = ParseBvh(WriteBvh(written), "export.bvh");
+  ASSERT_EQ(clip.num_frames(), 4);
+  for (int f = 0; f < 4; ++f) {
+    const BvhPose bp = BvhForwardKinematics(clip, f);
+    const FkResult fk =
+        ForwardKinematics(model, frames[f].root_pos, frames[f].root_rot, frames[f].q.data());
+    for (int b = 0; b < model.num_bodies(); ++b) {
+      const int j = clip.Find(model.body(b).name);
+      ASSERT_GE(j, 0);
+      EXPECT_LT((bp.pos[j] - HumanoidToBvhAxes(fk.body_world[b].translation())).norm(), 1e-6)
+          << model.body(b).name << " frame " << f;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace perch
