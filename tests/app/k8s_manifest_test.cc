@@ -1,0 +1,53 @@
+// The Kubernetes manifests agree with the repository: the ConfigMap carries configs/default.json,
+// and the ports actors dial are the ones the learner binds and its Service exposes.
+#include <fstream>
+#include <regex>
+#include <sstream>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "common/json_util.h"
+
+namespace perch {
+namespace {
+
+std::string Read(const std::string& rel) {
+  std::ifstream in(std::string(PERCH_SOURCE_DIR) + "/" + rel);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+TEST(K8sManifests, ConfigMapIsTheDefaultConfig) {
+  const std::string yaml = Read("k8s/configmap.yaml");
+  const size_t at = yaml.find("config.json: |");
+  ASSERT_NE(at, std::string::npos) << "k8s/configmap.yaml has no config.json block";
+  std::stringstream body(yaml.substr(yaml.find('\n', at) + 1));
+  std::string json_text, line;
+  while (std::getline(body, line)) json_text += (line.size() >= 4 ? line.substr(4) : line) + "\n";
+  const Json from_map = Json::parse(json_text);
+  const Json from_repo = LoadJsonFile(std::string(PERCH_SOURCE_DIR) + "/configs/default.json");
+  EXPECT_EQ(from_map, from_repo)
+      << "k8s/configmap.yaml is stale: run scripts/gen-k8s-configmap.sh";
+}
+
+TEST(K8sManifests, ActorPortsMatchLearnerBindsAndService) {
+  const std::string learner = Read("k8s/learner.yaml");
+  const std::string actors = Read("k8s/actors.yaml");
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(learner, m, std::regex(R"re("--rollout-bind", "tcp://\*:(\d+)")re")));
+  const std::string rollout = m[1];
+  ASSERT_TRUE(std::regex_search(learner, m, std::regex(R"re("--weights-bind", "tcp://\*:(\d+)")re")));
+  const std::string weights = m[1];
+  EXPECT_NE(actors.find("\"--rollout-port\", \"" + rollout + "\""), std::string::npos);
+  EXPECT_NE(actors.find("\"--weights-port\", \"" + weights + "\""), std::string::npos);
+  EXPECT_NE(learner.find("port: " + rollout), std::string::npos);
+  EXPECT_NE(learner.find("port: " + weights), std::string::npos);
+  // Actors reach the learner through its Service name.
+  ASSERT_TRUE(std::regex_search(learner, m, std::regex(R"re(kind: Service\s+metadata:\s+name: (\S+))re")));
+  EXPECT_NE(actors.find("\"--learner-host\", \"" + std::string(m[1]) + "\""), std::string::npos);
+}
+
+}  // namespace
+}  // namespace perch
