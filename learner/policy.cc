@@ -1,0 +1,404 @@
+#include "learner/policy.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "common/proto/model.pb.h"
+
+namespace perch {
+
+namespace {
+
+constexpr float kLog2Pi = 1.8378770664093453f;  // log(2 pi)
+
+std::string KindName(PolicyKind k) { return k == PolicyKind::kMeta ? "meta" : "gaussian"; }
+std::string StdModeName(StdMode m) { return m == StdMode::kFixed ? "fixed" : "trained"; }
+
+// Index of the largest entry (first on ties).
+int ArgMax(const float* x, int n) { return static_cast<int>(std::max_element(x, x + n) - x); }
+
+}  // namespace
+
+PolicyConfig PolicyConfig::Subtask(int obs_dim) {
+  PolicyConfig c;
+  c.obs_dim = obs_dim;
+  return c;
+}
+
+PolicyConfig PolicyConfig::Meta(int obs_dim) {
+  PolicyConfig c;
+  c.kind = PolicyKind::kMeta;
+  c.obs_dim = obs_dim;
+  c.act_dim = 2;
+  c.num_choices = 4;
+  c.target_choice = 3;
+  return c;
+}
+
+Json ToJson(const PolicyConfig& c) {
+  return Json{{"kind", KindName(c.kind)},
+              {"obs_dim", c.obs_dim},
+              {"act_dim", c.act_dim},
+              {"num_choices", c.num_choices},
+              {"target_choice", c.target_choice},
+              {"policy_net", ToJson(c.policy_net)},
+              {"value_net", ToJson(c.value_net)},
+              {"std_mode", StdModeName(c.std_mode)},
+              {"init_log_std", c.init_log_std},
+              {"hidden_gain", c.hidden_gain},
+              {"policy_out_gain", c.policy_out_gain},
+              {"value_out_gain", c.value_out_gain}};
+}
+
+PolicyConfig PolicyConfigFromJson(const Json& j, const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected an object, got " + j.dump());
+  CheckKnownKeys(
+      j,
+      {"kind", "obs_dim", "act_dim", "num_choices", "target_choice", "policy_net", "value_net",
+       "std_mode", "init_log_std", "hidden_gain", "policy_out_gain", "value_out_gain"},
+      ctx);
+  PolicyConfig c;
+  std::string kind = KindName(c.kind);
+  GetOptional(j, "kind", kind, ctx);
+  if (kind == "meta") {
+    c = PolicyConfig::Meta();
+  } else if (kind != "gaussian") {
+    throw ConfigError(ctx + ".kind: unknown policy kind '" + kind +
+                      "' (expected gaussian or meta)");
+  }
+  GetOptional(j, "obs_dim", c.obs_dim, ctx);
+  GetOptional(j, "act_dim", c.act_dim, ctx);
+  GetOptional(j, "num_choices", c.num_choices, ctx);
+  GetOptional(j, "target_choice", c.target_choice, ctx);
+  if (j.contains("policy_net"))
+    c.policy_net = MlpConfigFromJson(j["policy_net"], ctx + ".policy_net");
+  if (j.contains("value_net")) c.value_net = MlpConfigFromJson(j["value_net"], ctx + ".value_net");
+  std::string std_mode = StdModeName(c.std_mode);
+  GetOptional(j, "std_mode", std_mode, ctx);
+  if (std_mode == "fixed") {
+    c.std_mode = StdMode::kFixed;
+  } else if (std_mode == "trained") {
+    c.std_mode = StdMode::kTrained;
+  } else {
+    throw ConfigError(ctx + ".std_mode: unknown '" + std_mode + "' (expected trained or fixed)");
+  }
+  GetOptional(j, "init_log_std", c.init_log_std, ctx);
+  GetOptional(j, "hidden_gain", c.hidden_gain, ctx);
+  GetOptional(j, "policy_out_gain", c.policy_out_gain, ctx);
+  GetOptional(j, "value_out_gain", c.value_out_gain, ctx);
+  if (c.obs_dim <= 0) throw ConfigError(ctx + ".obs_dim: must be > 0");
+  if (c.act_dim <= 0) throw ConfigError(ctx + ".act_dim: must be > 0");
+  if (c.kind == PolicyKind::kMeta) {
+    if (c.num_choices < 2) throw ConfigError(ctx + ".num_choices: must be >= 2");
+    if (c.target_choice < 0 || c.target_choice >= c.num_choices) {
+      throw ConfigError(ctx + ".target_choice: must be in [0, num_choices)");
+    }
+  }
+  return c;
+}
+
+ActorCritic::ActorCritic(const PolicyConfig& config, uint64_t seed) : config_(config) {
+  if (config.obs_dim <= 0 || config.act_dim <= 0) {
+    throw ConfigError("policy: obs_dim and act_dim must be > 0");
+  }
+  const bool meta = config.kind == PolicyKind::kMeta;
+  if (meta && (config.num_choices < 2 || config.target_choice < 0 ||
+               config.target_choice >= config.num_choices)) {
+    throw ConfigError("policy: meta needs num_choices >= 2 and target_choice in range");
+  }
+  if (!meta) config_.num_choices = 0, config_.target_choice = 0;
+  const int head = meta ? config.num_choices + config.act_dim : config.act_dim;
+  pi_ = Mlp(config.obs_dim, config.policy_net, head);
+  vf_ = Mlp(config.obs_dim, config.value_net, 1);
+  log_std_offset_ = pi_.num_params();
+  value_offset_ = log_std_offset_ + config.act_dim;
+  num_params_ = value_offset_ + vf_.num_params();
+  params_ = VectorXf::Zero(num_params_);
+  mask_ = VectorXf::Ones(num_params_);
+  if (config.std_mode == StdMode::kFixed) mask_.segment(log_std_offset_, config.act_dim).setZero();
+
+  Rng rng(seed);
+  float* p = params_.data();
+  if (meta) {
+    // Separate orthogonal heads, as Baselines' separate dense layers.
+    pi_.Init(p, rng, config.hidden_gain, config.policy_out_gain, true, 0, config.num_choices);
+    pi_.Init(p, rng, config.hidden_gain, config.policy_out_gain, false, config.num_choices, head);
+  } else {
+    pi_.Init(p, rng, config.hidden_gain, config.policy_out_gain);
+  }
+  params_.segment(log_std_offset_, config.act_dim).setConstant(config.init_log_std);
+  vf_.Init(p + value_offset_, rng, config.hidden_gain, config.value_out_gain);
+}
+
+void ActorCritic::Evaluate(const float* params, const Eigen::Ref<const MatrixXf>& obs,
+                           const Eigen::Ref<const MatrixXf>& actions,
+                           PolicyEvalCache* cache) const {
+  const int k = config_.act_dim;
+  const Eigen::Index batch = obs.cols();
+  const bool meta = config_.kind == PolicyKind::kMeta;
+  const int c = config_.num_choices;
+  pi_.Forward(params, obs, &cache->pi);
+  const MatrixXf& head = cache->pi.out();
+  Eigen::Map<const VectorXf> log_std(params + log_std_offset_, k);
+  const VectorXf inv_sigma = (-log_std.array()).exp().matrix();
+  const float log_std_sum = log_std.sum();
+  const float gauss_const = -log_std_sum - 0.5f * k * kLog2Pi;
+  const float gauss_entropy = log_std_sum + 0.5f * k * (1.0f + kLog2Pi);
+
+  const int mu_row = meta ? c : 0;
+  const int a_row = meta ? 1 : 0;
+  cache->z.resize(k, batch);
+  cache->z.array() = (actions.middleRows(a_row, k) - head.middleRows(mu_row, k)).array().colwise() *
+                     inv_sigma.array();
+  cache->log_prob.resize(batch);
+  cache->log_prob.noalias() = (-0.5f * cache->z.colwise().squaredNorm()).transpose();
+  cache->log_prob.array() += gauss_const;
+  cache->entropy.setConstant(batch, gauss_entropy);
+
+  if (meta) {
+    cache->probs.resize(c, batch);
+    cache->choice.resize(batch);
+    cache->gate.resize(batch);
+    for (Eigen::Index b = 0; b < batch; ++b) {
+      const float raw_choice = actions(0, b);
+      const int ch = static_cast<int>(std::lround(raw_choice));
+      if (!(ch >= 0 && ch < c)) {
+        throw ConfigError("policy: meta action choice " + std::to_string(raw_choice) +
+                          " out of range [0, " + std::to_string(c) + ")");
+      }
+      const float mx = head.col(b).head(c).maxCoeff();
+      float sum = 0.0f;
+      for (int j = 0; j < c; ++j) {
+        const float e = std::exp(head(j, b) - mx);
+        cache->probs(j, b) = e;
+        sum += e;
+      }
+      const float log_sum = std::log(sum);
+      float h = 0.0f;
+      for (int j = 0; j < c; ++j) {
+        cache->probs(j, b) /= sum;
+        const float logp_j = head(j, b) - mx - log_sum;
+        h -= cache->probs(j, b) * logp_j;
+      }
+      const float gate = ch == config_.target_choice ? 1.0f : 0.0f;
+      cache->choice[b] = ch;
+      cache->gate[b] = gate;
+      cache->log_prob[b] = (head(ch, b) - mx - log_sum) + gate * cache->log_prob[b];
+      cache->entropy[b] += h;
+    }
+  }
+
+  vf_.Forward(params + value_offset_, obs, &cache->vf);
+  cache->value = cache->vf.out().row(0).transpose();
+}
+
+void ActorCritic::Backward(const float* params, const Eigen::Ref<const VectorXf>& dlogp,
+                           const Eigen::Ref<const VectorXf>& dent,
+                           const Eigen::Ref<const VectorXf>& dval, PolicyEvalCache* cache,
+                           float* grad_params) const {
+  const int k = config_.act_dim;
+  const Eigen::Index batch = dlogp.size();
+  const bool meta = config_.kind == PolicyKind::kMeta;
+  const int c = config_.num_choices;
+  const int mu_row = meta ? c : 0;
+  Eigen::Map<const VectorXf> log_std(params + log_std_offset_, k);
+  const VectorXf inv_sigma = (-log_std.array()).exp().matrix();
+  Eigen::Map<VectorXf> g_log_std(grad_params + log_std_offset_, k);
+
+  cache->grad_head.resize(head_dim(), batch);
+  // Gaussian part: d logp / d mu = z / sigma, d logp / d log_std = z^2 - 1, d H / d log_std = 1.
+  VectorXf w = dlogp;
+  if (meta) w.array() *= Eigen::Map<const VectorXf>(cache->gate.data(), batch).array();
+  auto g_mu = cache->grad_head.middleRows(mu_row, k);
+  g_mu.array() = cache->z.array().colwise() * inv_sigma.array();
+  g_mu.array().rowwise() *= w.transpose().array();
+  g_log_std.noalias() += (cache->z.array().square() - 1.0f).matrix() * w;
+  g_log_std.array() += dent.sum();
+
+  if (meta) {
+    for (Eigen::Index b = 0; b < batch; ++b) {
+      // H = -sum p log p; dH/dl_j = -p_j (log p_j + H).
+      float h = 0.0f;
+      for (int j = 0; j < c; ++j) {
+        const float p = cache->probs(j, b);
+        if (p > 0) h -= p * std::log(p);
+      }
+      for (int j = 0; j < c; ++j) {
+        const float p = cache->probs(j, b);
+        const float logp = p > 0 ? std::log(p) : 0.0f;
+        const float onehot = j == cache->choice[b] ? 1.0f : 0.0f;
+        cache->grad_head(j, b) = dlogp[b] * (onehot - p) - dent[b] * p * (logp + h);
+      }
+    }
+  }
+  pi_.Backward(params, cache->grad_head, &cache->pi, grad_params);
+
+  cache->grad_value.resize(1, batch);
+  cache->grad_value.row(0) = dval.transpose();
+  vf_.Backward(params + value_offset_, cache->grad_value, &cache->vf, grad_params + value_offset_);
+}
+
+void ActorCritic::GetShape(proto::PolicyShape* shape) const {
+  shape->Clear();
+  shape->set_kind(KindName(config_.kind));
+  shape->set_obs_dim(config_.obs_dim);
+  shape->set_act_dim(config_.act_dim);
+  shape->set_num_choices(config_.num_choices);
+  shape->set_target_choice(config_.target_choice);
+  for (int h : config_.policy_net.hidden) shape->add_policy_hidden(h);
+  for (int h : config_.value_net.hidden) shape->add_value_hidden(h);
+  // Both nets share the activation field on the wire only when equal; else "policy/value".
+  std::string act = ActivationName(config_.policy_net.activation);
+  if (config_.value_net.activation != config_.policy_net.activation) {
+    act += "/" + ActivationName(config_.value_net.activation);
+  }
+  shape->set_activation(act);
+  shape->set_std_mode(StdModeName(config_.std_mode));
+  shape->set_num_params(num_params_);
+}
+
+namespace {
+
+std::string JoinInts(const google::protobuf::RepeatedField<int32_t>& v) {
+  std::string s = "[";
+  for (int i = 0; i < v.size(); ++i) s += (i ? "," : "") + std::to_string(v.Get(i));
+  return s + "]";
+}
+
+}  // namespace
+
+void ActorCritic::CheckShape(const proto::PolicyShape& blob, const std::string& ctx) const {
+  proto::PolicyShape mine;
+  GetShape(&mine);
+  auto differs = [&](const std::string& field, const std::string& theirs, const std::string& ours) {
+    if (theirs != ours) {
+      throw ConfigError(ctx + ": network shape differs: " + field + " is " + theirs +
+                        " in the blob, " + ours + " in this model");
+    }
+  };
+  differs("kind", blob.kind(), mine.kind());
+  differs("obs_dim", std::to_string(blob.obs_dim()), std::to_string(mine.obs_dim()));
+  differs("act_dim", std::to_string(blob.act_dim()), std::to_string(mine.act_dim()));
+  differs("num_choices", std::to_string(blob.num_choices()), std::to_string(mine.num_choices()));
+  differs("target_choice", std::to_string(blob.target_choice()),
+          std::to_string(mine.target_choice()));
+  differs("policy_hidden", JoinInts(blob.policy_hidden()), JoinInts(mine.policy_hidden()));
+  differs("value_hidden", JoinInts(blob.value_hidden()), JoinInts(mine.value_hidden()));
+  differs("activation", blob.activation(), mine.activation());
+  differs("std_mode", blob.std_mode(), mine.std_mode());
+  differs("num_params", std::to_string(blob.num_params()), std::to_string(mine.num_params()));
+}
+
+PolicyRunner::PolicyRunner(const PolicyConfig& config, const NormalizerConfig& norm_config)
+    : model_(config, 0),
+      normalizer_(config.obs_dim, norm_config),
+      delta_(config.obs_dim, 0.0),
+      norm_(config.obs_dim),
+      head_(model_.head_dim()),
+      scratch_(2 * std::max(model_.policy_mlp().max_width(), model_.value_mlp().max_width())) {}
+
+void PolicyRunner::SetWeights(const VectorXf& params, const RunningMeanStd& obs_stats,
+                              uint64_t version) {
+  if (params.size() != model_.num_params()) {
+    throw ConfigError("PolicyRunner::SetWeights: " + std::to_string(params.size()) +
+                      " parameters, model has " + std::to_string(model_.num_params()));
+  }
+  if (obs_stats.dim() != model_.obs_dim()) {
+    throw ConfigError("PolicyRunner::SetWeights: obs stats dimension " +
+                      std::to_string(obs_stats.dim()) + ", model has " +
+                      std::to_string(model_.obs_dim()));
+  }
+  model_.params() = params;
+  normalizer_.stats() = obs_stats;
+  normalizer_.Refresh();
+  version_ = version;
+}
+
+void PolicyRunner::LoadWeights(const proto::ModelWeights& w) {
+  const std::string ctx = "model weights v" + std::to_string(w.version());
+  model_.CheckShape(w.shape(), ctx);
+  if (w.params_size() != model_.num_params()) {
+    throw ConfigError(ctx + ": params has " + std::to_string(w.params_size()) +
+                      " values, shape says " + std::to_string(model_.num_params()));
+  }
+  RunningMeanStd stats =
+      RunningMeanStd::FromProto(w.obs_stats(), model_.obs_dim(), ctx + ".obs_stats");
+  VectorXf p = Eigen::Map<const VectorXf>(w.params().data(), w.params_size());
+  if (!p.allFinite()) throw ConfigError(ctx + ": params contain NaN/Inf");
+  SetWeights(p, stats, w.version());
+  // The learner's transform settings win over the runner's own.
+  NormalizerConfig nc = normalizer_.config();
+  nc.normalize_obs = w.normalize_obs();
+  if (w.obs_clip() > 0) nc.obs_clip = w.obs_clip();
+  if (w.obs_eps() >= 0) nc.obs_eps = w.obs_eps();
+  normalizer_.set_config(nc);
+}
+
+void PolicyRunner::ClearObsStatsDelta() { delta_.Reset(0.0); }
+
+PolicyRunner::Output PolicyRunner::Act(const float* raw_obs, Rng& rng, bool deterministic,
+                                       float* norm_obs, float* action) {
+  if (update_obs_stats_ && normalizer_.config().normalize_obs) {
+    normalizer_.stats().Update(raw_obs);
+    normalizer_.Refresh();
+    delta_.Update(raw_obs);
+  }
+  normalizer_.Normalize(raw_obs, norm_.data());
+  if (norm_obs != nullptr) std::copy(norm_.begin(), norm_.end(), norm_obs);
+  const PolicyConfig& cfg = model_.config();
+  const float* p = model_.params().data();
+  model_.policy_mlp().ForwardOne(p, norm_.data(), head_.data(), scratch_.data());
+
+  const int k = cfg.act_dim;
+  const float* log_std = p + model_.log_std_offset();
+  const bool meta = cfg.kind == PolicyKind::kMeta;
+  const float* mu = head_.data() + (meta ? cfg.num_choices : 0);
+  float* target = action + (meta ? 1 : 0);
+  float gauss_logp = 0.0f;
+  for (int i = 0; i < k; ++i) {
+    const float z = deterministic ? 0.0f : static_cast<float>(rng.Normal());
+    target[i] = mu[i] + std::exp(log_std[i]) * z;
+    gauss_logp += -0.5f * z * z - log_std[i];
+  }
+  gauss_logp -= 0.5f * k * kLog2Pi;
+
+  Output out;
+  if (meta) {
+    const int c = cfg.num_choices;
+    const float mx = *std::max_element(head_.data(), head_.data() + c);
+    float sum = 0.0f;
+    for (int j = 0; j < c; ++j) sum += std::exp(head_[j] - mx);
+    int ch = c - 1;
+    if (deterministic) {
+      ch = ArgMax(head_.data(), c);
+    } else {
+      const double u = rng.Uniform() * sum;
+      double acc = 0.0;
+      for (int j = 0; j < c; ++j) {
+        acc += std::exp(head_[j] - mx);
+        if (u < acc) {
+          ch = j;
+          break;
+        }
+      }
+    }
+    action[0] = static_cast<float>(ch);
+    out.log_prob = head_[ch] - mx - std::log(sum) + (ch == cfg.target_choice ? gauss_logp : 0.0f);
+  } else {
+    out.log_prob = gauss_logp;
+  }
+  float v = 0.0f;
+  model_.value_mlp().ForwardOne(p + model_.value_offset(), norm_.data(), &v, scratch_.data());
+  out.value = v;
+  return out;
+}
+
+float PolicyRunner::Value(const float* raw_obs) {
+  normalizer_.Normalize(raw_obs, norm_.data());
+  float v = 0.0f;
+  model_.value_mlp().ForwardOne(model_.params().data() + model_.value_offset(), norm_.data(), &v,
+                                scratch_.data());
+  return v;
+}
+
+}  // namespace perch

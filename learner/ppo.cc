@@ -1,0 +1,422 @@
+#include "learner/ppo.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "common/proto/model.pb.h"
+
+namespace perch {
+
+PpoConfig PpoConfig::Subtask() { return PpoConfig(); }
+
+PpoConfig PpoConfig::Meta() {
+  PpoConfig c;
+  c.steps_per_update = 64;
+  c.num_minibatches = 8;
+  c.num_epochs = 2;
+  c.learning_rate = 1e-4f;
+  return c;
+}
+
+Json ToJson(const PpoConfig& c) {
+  return Json{{"steps_per_update", c.steps_per_update},
+              {"num_minibatches", c.num_minibatches},
+              {"num_epochs", c.num_epochs},
+              {"learning_rate", c.learning_rate},
+              {"gamma", c.gamma},
+              {"gae_lambda", c.gae_lambda},
+              {"clip_range", c.clip_range},
+              {"value_coef", c.value_coef},
+              {"clip_value", c.clip_value},
+              {"value_clip_range", c.value_clip_range},
+              {"entropy_coef", c.entropy_coef},
+              {"max_grad_norm", c.max_grad_norm},
+              {"adam_beta1", c.adam_beta1},
+              {"adam_beta2", c.adam_beta2},
+              {"adam_eps", c.adam_eps},
+              {"normalize_advantages", c.normalize_advantages},
+              {"advantage_eps", c.advantage_eps},
+              {"bootstrap_on_truncation", c.bootstrap_on_truncation},
+              {"obs_norm", ToJson(c.obs_norm)},
+              {"reward_scaling", ToJson(c.reward_scaling)}};
+}
+
+PpoConfig PpoConfigFromJson(const Json& j, const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected an object, got " + j.dump());
+  CheckKnownKeys(j,
+                 {"steps_per_update",
+                  "num_minibatches",
+                  "num_epochs",
+                  "learning_rate",
+                  "gamma",
+                  "gae_lambda",
+                  "clip_range",
+                  "value_coef",
+                  "clip_value",
+                  "value_clip_range",
+                  "entropy_coef",
+                  "max_grad_norm",
+                  "adam_beta1",
+                  "adam_beta2",
+                  "adam_eps",
+                  "normalize_advantages",
+                  "advantage_eps",
+                  "bootstrap_on_truncation",
+                  "obs_norm",
+                  "reward_scaling"},
+                 ctx);
+  PpoConfig c;
+  GetOptional(j, "steps_per_update", c.steps_per_update, ctx);
+  GetOptional(j, "num_minibatches", c.num_minibatches, ctx);
+  GetOptional(j, "num_epochs", c.num_epochs, ctx);
+  GetOptional(j, "learning_rate", c.learning_rate, ctx);
+  GetOptional(j, "gamma", c.gamma, ctx);
+  GetOptional(j, "gae_lambda", c.gae_lambda, ctx);
+  GetOptional(j, "clip_range", c.clip_range, ctx);
+  GetOptional(j, "value_coef", c.value_coef, ctx);
+  GetOptional(j, "clip_value", c.clip_value, ctx);
+  GetOptional(j, "value_clip_range", c.value_clip_range, ctx);
+  GetOptional(j, "entropy_coef", c.entropy_coef, ctx);
+  GetOptional(j, "max_grad_norm", c.max_grad_norm, ctx);
+  GetOptional(j, "adam_beta1", c.adam_beta1, ctx);
+  GetOptional(j, "adam_beta2", c.adam_beta2, ctx);
+  GetOptional(j, "adam_eps", c.adam_eps, ctx);
+  GetOptional(j, "normalize_advantages", c.normalize_advantages, ctx);
+  GetOptional(j, "advantage_eps", c.advantage_eps, ctx);
+  GetOptional(j, "bootstrap_on_truncation", c.bootstrap_on_truncation, ctx);
+  if (j.contains("obs_norm"))
+    c.obs_norm = NormalizerConfigFromJson(j["obs_norm"], ctx + ".obs_norm");
+  if (j.contains("reward_scaling")) {
+    c.reward_scaling = RewardScalingConfigFromJson(j["reward_scaling"], ctx + ".reward_scaling");
+  }
+  auto require = [&](bool ok, const char* field, const char* what) {
+    if (!ok) throw ConfigError(ctx + "." + field + ": " + what);
+  };
+  require(c.steps_per_update > 0, "steps_per_update", "must be > 0");
+  require(c.num_minibatches > 0, "num_minibatches", "must be > 0");
+  require(c.num_minibatches <= c.steps_per_update, "num_minibatches",
+          "must be <= steps_per_update");
+  require(c.num_epochs > 0, "num_epochs", "must be > 0");
+  require(c.learning_rate > 0, "learning_rate", "must be > 0");
+  require(c.gamma >= 0 && c.gamma <= 1, "gamma", "must be in [0, 1]");
+  require(c.gae_lambda >= 0 && c.gae_lambda <= 1, "gae_lambda", "must be in [0, 1]");
+  require(c.clip_range > 0, "clip_range", "must be > 0");
+  require(c.value_coef >= 0, "value_coef", "must be >= 0");
+  require(c.value_clip_range > 0, "value_clip_range", "must be > 0");
+  require(c.entropy_coef >= 0, "entropy_coef", "must be >= 0");
+  require(c.adam_beta1 >= 0 && c.adam_beta1 < 1, "adam_beta1", "must be in [0, 1)");
+  require(c.adam_beta2 >= 0 && c.adam_beta2 < 1, "adam_beta2", "must be in [0, 1)");
+  require(c.adam_eps > 0, "adam_eps", "must be > 0");
+  require(c.advantage_eps >= 0, "advantage_eps", "must be >= 0");
+  return c;
+}
+
+Json ToJson(const UpdateStats& s) {
+  return Json{{"num_samples", s.num_samples},
+              {"num_minibatch_steps", s.num_minibatch_steps},
+              {"policy_loss", s.policy_loss},
+              {"value_loss", s.value_loss},
+              {"entropy", s.entropy},
+              {"approx_kl", s.approx_kl},
+              {"clip_fraction", s.clip_fraction},
+              {"grad_norm", s.grad_norm},
+              {"explained_variance", s.explained_variance},
+              {"mean_reward", s.mean_reward},
+              {"mean_scaled_reward", s.mean_scaled_reward},
+              {"mean_advantage", s.mean_advantage},
+              {"mean_return", s.mean_return},
+              {"log_std_mean", s.log_std_mean}};
+}
+
+PpoLossTerms PpoLoss(const ActorCritic& model, const float* params, const PpoConfig& cfg,
+                     const Eigen::Ref<const MatrixXf>& obs,
+                     const Eigen::Ref<const MatrixXf>& actions,
+                     const Eigen::Ref<const VectorXf>& old_logp,
+                     const Eigen::Ref<const VectorXf>& old_value,
+                     const Eigen::Ref<const VectorXf>& adv, const Eigen::Ref<const VectorXf>& ret,
+                     PpoLossWorkspace* ws, float* grad) {
+  const int b = static_cast<int>(obs.cols());
+  model.Evaluate(params, obs, actions, &ws->eval);
+  const PolicyEvalCache& ev = ws->eval;
+  ws->dlogp.resize(b);
+  ws->dent.resize(b);
+  ws->dval.resize(b);
+  const float inv_b = 1.0f / b;
+  const float clip = cfg.clip_range;
+  const float vclip = cfg.value_clip_range;
+  double pg = 0, vf = 0, kl = 0, cf = 0;
+  for (int k = 0; k < b; ++k) {
+    const float log_ratio = ev.log_prob[k] - old_logp[k];
+    const float ratio = std::exp(log_ratio);
+    const float a = adv[k];
+    const float pg1 = -a * ratio;
+    const float pg2 = -a * std::clamp(ratio, 1.0f - clip, 1.0f + clip);
+    // The max's gradient: the unclipped term, or the clipped one (zero outside the range).
+    const bool inside = ratio > 1.0f - clip && ratio < 1.0f + clip;
+    ws->dlogp[k] = (pg1 >= pg2 || inside) ? -a * ratio * inv_b : 0.0f;
+    pg += std::max(pg1, pg2);
+    kl += 0.5 * log_ratio * log_ratio;
+    cf += std::abs(ratio - 1.0f) > clip ? 1.0 : 0.0;
+
+    const float v = ev.value[k];
+    const float r = ret[k];
+    float dv;
+    if (cfg.clip_value) {
+      const float dv_old = v - old_value[k];
+      const float vc = old_value[k] + std::clamp(dv_old, -vclip, vclip);
+      const float e1 = (v - r) * (v - r);
+      const float e2 = (vc - r) * (vc - r);
+      const bool v_inside = dv_old > -vclip && dv_old < vclip;
+      dv = (e1 >= e2) ? v - r : (v_inside ? vc - r : 0.0f);
+      vf += 0.5 * std::max(e1, e2);
+    } else {
+      dv = v - r;
+      vf += 0.5 * (v - r) * (v - r);
+    }
+    ws->dval[k] = cfg.value_coef * dv * inv_b;
+    ws->dent[k] = -cfg.entropy_coef * inv_b;
+  }
+  PpoLossTerms t;
+  t.policy_loss = pg * inv_b;
+  t.value_loss = vf * inv_b;
+  t.entropy = ev.entropy.cast<double>().mean();
+  t.approx_kl = kl * inv_b;
+  t.clip_fraction = cf * inv_b;
+  t.total = t.policy_loss - cfg.entropy_coef * t.entropy + cfg.value_coef * t.value_loss;
+  if (grad != nullptr) model.Backward(params, ws->dlogp, ws->dent, ws->dval, &ws->eval, grad);
+  return t;
+}
+
+PpoLearner::PpoLearner(const PolicyConfig& policy, const PpoConfig& ppo, uint64_t seed)
+    : policy_config_(policy),
+      ppo_(ppo),
+      model_(policy, seed),
+      obs_norm_(policy.obs_dim, ppo.obs_norm),
+      reward_scaler_(ppo.reward_scaling, ppo.gamma),
+      adam_(model_.num_params(), ppo.adam_beta1, ppo.adam_beta2, ppo.adam_eps),
+      // A stream of its own so that shuffling does not depend on the init draws.
+      rng_(seed ^ 0x5bd1e995a4f3c2e1ULL),
+      grad_(VectorXf::Zero(model_.num_params())) {}
+
+void PpoLearner::AddObsStats(const RunningMeanStd& delta) {
+  if (delta.count() <= 0) return;
+  obs_norm_.stats().Merge(delta);
+  obs_norm_.Refresh();
+}
+
+UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
+  const int obs_dim = model_.obs_dim();
+  const int act_size = model_.action_size();
+  int n = 0;
+  for (size_t i = 0; i < rollouts.size(); ++i) {
+    const std::string ctx = "rollout[" + std::to_string(i) + "]";
+    const Rollout& r = rollouts[i];
+    r.Validate(ctx);
+    if (r.obs_dim != obs_dim || r.action_size != act_size) {
+      throw ConfigError(ctx + ": obs_dim/action_size " + std::to_string(r.obs_dim) + "/" +
+                        std::to_string(r.action_size) + ", model has " + std::to_string(obs_dim) +
+                        "/" + std::to_string(act_size));
+    }
+    if (model_.config().kind == PolicyKind::kMeta) {
+      // A bad choice would otherwise throw halfway through the epochs.
+      const int c = model_.config().num_choices;
+      for (int t = 0; t < r.size(); ++t) {
+        const float ch = r.actions[static_cast<size_t>(t) * act_size];
+        if (!(ch >= 0 && ch <= c - 1 && ch == std::round(ch))) {
+          throw ConfigError(ctx + ".actions: meta choice " + std::to_string(ch) + " at step " +
+                            std::to_string(t) + " is not in 0.." + std::to_string(c - 1));
+        }
+      }
+    }
+    n += r.size();
+  }
+  UpdateStats st;
+  if (n == 0) return st;
+
+  obs_.resize(obs_dim, n);
+  actions_.resize(act_size, n);
+  old_logp_.resize(n);
+  old_value_.resize(n);
+  adv_.resize(n);
+  ret_.resize(n);
+  double sum_r = 0.0, sum_sr = 0.0;
+  std::vector<uint8_t> done;
+  int off = 0;
+  for (const Rollout& r : rollouts) {
+    const int t = r.size();
+    if (t == 0) continue;
+    AddObsStats(r.obs_stats_delta);
+    scaled_rewards_.assign(r.rewards.begin(), r.rewards.end());
+    done.resize(t);
+    for (int k = 0; k < t; ++k) done[k] = r.terminated[k] | r.truncated[k];
+    reward_scaler_.ScaleInPlace(r.stream_id, scaled_rewards_.data(), done.data(), t);
+    seg_adv_.resize(t);
+    seg_ret_.resize(t);
+    ComputeGae(r, scaled_rewards_.data(), ppo_.gamma, ppo_.gae_lambda, ppo_.bootstrap_on_truncation,
+               seg_adv_.data(), seg_ret_.data());
+    obs_.middleCols(off, t) = Eigen::Map<const MatrixXf>(r.obs.data(), obs_dim, t);
+    actions_.middleCols(off, t) = Eigen::Map<const MatrixXf>(r.actions.data(), act_size, t);
+    old_logp_.segment(off, t) = Eigen::Map<const VectorXf>(r.log_probs.data(), t);
+    old_value_.segment(off, t) = Eigen::Map<const VectorXf>(r.values.data(), t);
+    adv_.segment(off, t) = Eigen::Map<const VectorXf>(seg_adv_.data(), t);
+    ret_.segment(off, t) = Eigen::Map<const VectorXf>(seg_ret_.data(), t);
+    for (int k = 0; k < t; ++k) {
+      sum_r += r.rewards[k];
+      sum_sr += scaled_rewards_[k];
+    }
+    off += t;
+  }
+  st.num_samples = n;
+  st.mean_reward = static_cast<float>(sum_r / n);
+  st.mean_scaled_reward = static_cast<float>(sum_sr / n);
+  st.mean_advantage = adv_.mean();
+  st.mean_return = ret_.mean();
+  {
+    const double var_ret = (ret_.array() - ret_.mean()).square().mean();
+    const VectorXf resid = ret_ - old_value_;
+    const double var_res = (resid.array() - resid.mean()).square().mean();
+    st.explained_variance = var_ret > 0 ? static_cast<float>(1.0 - var_res / var_ret) : 0.0f;
+  }
+
+  const int num_mb = std::max(1, std::min(ppo_.num_minibatches, n));
+  perm_.resize(n);
+  for (int i = 0; i < n; ++i) perm_[i] = i;
+  double acc_pg = 0, acc_vf = 0, acc_ent = 0, acc_kl = 0, acc_cf = 0, acc_gn = 0;
+  int steps = 0;
+  float* params = model_.params().data();
+  for (int epoch = 0; epoch < ppo_.num_epochs; ++epoch) {
+    // Fisher-Yates with our portable RNG: same seed, same minibatches everywhere.
+    for (int i = n - 1; i > 0; --i) {
+      std::swap(perm_[i], perm_[rng_.UniformInt(static_cast<uint64_t>(i) + 1)]);
+    }
+    for (int m = 0; m < num_mb; ++m) {
+      const int begin = static_cast<int>(static_cast<int64_t>(m) * n / num_mb);
+      const int end = static_cast<int>(static_cast<int64_t>(m + 1) * n / num_mb);
+      const int b = end - begin;
+      mb_obs_.resize(obs_dim, b);
+      mb_act_.resize(act_size, b);
+      mb_logp_.resize(b);
+      mb_value_.resize(b);
+      mb_adv_.resize(b);
+      mb_ret_.resize(b);
+      for (int k = 0; k < b; ++k) {
+        const int idx = perm_[begin + k];
+        mb_obs_.col(k) = obs_.col(idx);
+        mb_act_.col(k) = actions_.col(idx);
+        mb_logp_[k] = old_logp_[idx];
+        mb_value_[k] = old_value_[idx];
+        mb_adv_[k] = adv_[idx];
+        mb_ret_[k] = ret_[idx];
+      }
+      if (ppo_.normalize_advantages && b > 1) {
+        const float mean = mb_adv_.mean();
+        const float sd = std::sqrt((mb_adv_.array() - mean).square().mean());
+        mb_adv_.array() = (mb_adv_.array() - mean) / (sd + ppo_.advantage_eps);
+      }
+      grad_.setZero();
+      const PpoLossTerms lt = PpoLoss(model_, params, ppo_, mb_obs_, mb_act_, mb_logp_, mb_value_,
+                                      mb_adv_, mb_ret_, &ws_, grad_.data());
+      grad_.array() *= model_.trainable_mask().array();
+      const float gn = grad_.norm();
+      if (ppo_.max_grad_norm > 0 && gn > ppo_.max_grad_norm) grad_ *= ppo_.max_grad_norm / gn;
+      adam_.Step(model_.params(), grad_, ppo_.learning_rate);
+      params = model_.params().data();
+
+      acc_pg += lt.policy_loss;
+      acc_vf += lt.value_loss;
+      acc_ent += lt.entropy;
+      acc_kl += lt.approx_kl;
+      acc_cf += lt.clip_fraction;
+      acc_gn += gn;
+      ++steps;
+    }
+  }
+  st.num_minibatch_steps = steps;
+  st.policy_loss = static_cast<float>(acc_pg / steps);
+  st.value_loss = static_cast<float>(acc_vf / steps);
+  st.entropy = static_cast<float>(acc_ent / steps);
+  st.approx_kl = static_cast<float>(acc_kl / steps);
+  st.clip_fraction = static_cast<float>(acc_cf / steps);
+  st.grad_norm = static_cast<float>(acc_gn / steps);
+  st.log_std_mean = model_.params().segment(model_.log_std_offset(), model_.act_dim()).mean();
+  ++num_updates_;
+  num_samples_ += n;
+  return st;
+}
+
+void PpoLearner::ExportWeights(proto::ModelWeights* w) const {
+  w->Clear();
+  model_.GetShape(w->mutable_shape());
+  w->set_version(static_cast<uint64_t>(num_updates_));
+  const VectorXf& p = model_.params();
+  w->mutable_params()->Assign(p.data(), p.data() + p.size());
+  obs_norm_.stats().ToProto(w->mutable_obs_stats());
+  w->set_obs_clip(obs_norm_.config().obs_clip);
+  w->set_obs_eps(obs_norm_.config().obs_eps);
+  w->set_normalize_obs(obs_norm_.config().normalize_obs);
+}
+
+void PpoLearner::ExportState(proto::LearnerState* s) const {
+  s->Clear();
+  ExportWeights(s->mutable_model());
+  adam_.ToProto(s->mutable_adam());
+  reward_scaler_.return_stats().ToProto(s->mutable_return_stats());
+  std::vector<std::pair<uint64_t, double>> streams(reward_scaler_.streams().begin(),
+                                                   reward_scaler_.streams().end());
+  std::sort(streams.begin(), streams.end());  // deterministic bytes
+  for (const auto& [id, ret] : streams) {
+    proto::ReturnStream* rs = s->add_return_streams();
+    rs->set_stream_id(id);
+    rs->set_ret(ret);
+  }
+  const Rng::State rs = rng_.GetState();
+  for (uint64_t w : rs.s) s->mutable_rng()->add_s(w);
+  s->mutable_rng()->set_has_spare(rs.has_spare);
+  s->mutable_rng()->set_spare(rs.spare);
+  s->set_num_updates(num_updates_);
+  s->set_num_samples(num_samples_);
+  s->set_ppo_config_json(ToJson(ppo_).dump());
+  s->set_policy_config_json(ToJson(policy_config_).dump());
+}
+
+void PpoLearner::ImportWeights(const proto::ModelWeights& w, const std::string& ctx) {
+  model_.CheckShape(w.shape(), ctx);
+  if (w.params_size() != model_.num_params()) {
+    throw ConfigError(ctx + ": params has " + std::to_string(w.params_size()) +
+                      " values, the network needs " + std::to_string(model_.num_params()));
+  }
+  VectorXf p = Eigen::Map<const VectorXf>(w.params().data(), w.params_size());
+  if (!p.allFinite()) throw ConfigError(ctx + ": params contain NaN/Inf");
+  RunningMeanStd stats =
+      RunningMeanStd::FromProto(w.obs_stats(), model_.obs_dim(), ctx + ".obs_stats");
+  model_.params() = p;
+  obs_norm_.stats() = stats;
+  obs_norm_.Refresh();
+  num_updates_ = static_cast<int64_t>(w.version());
+}
+
+void PpoLearner::ImportState(const proto::LearnerState& s, const std::string& ctx) {
+  // Validate everything into temporaries first: a bad blob changes nothing.
+  if (!s.has_model()) throw ConfigError(ctx + ": missing model");
+  PpoLearner tmp = *this;
+  tmp.ImportWeights(s.model(), ctx + ".model");
+  tmp.adam_.FromProto(s.adam(), ctx + ".adam");
+  tmp.reward_scaler_.return_stats() =
+      RunningMeanStd::FromProto(s.return_stats(), 1, ctx + ".return_stats");
+  tmp.reward_scaler_.streams().clear();
+  for (const proto::ReturnStream& rs : s.return_streams()) {
+    if (!std::isfinite(rs.ret())) throw ConfigError(ctx + ".return_streams: non-finite return");
+    tmp.reward_scaler_.streams()[rs.stream_id()] = rs.ret();
+  }
+  if (s.rng().s_size() != 4) throw ConfigError(ctx + ".rng: expected 4 state words");
+  Rng::State st{{s.rng().s(0), s.rng().s(1), s.rng().s(2), s.rng().s(3)},
+                s.rng().has_spare(),
+                s.rng().spare()};
+  tmp.rng_.SetState(st);
+  if (s.num_updates() < 0 || s.num_samples() < 0) throw ConfigError(ctx + ": negative counters");
+  tmp.num_updates_ = s.num_updates();
+  tmp.num_samples_ = s.num_samples();
+  *this = std::move(tmp);
+}
+
+}  // namespace perch

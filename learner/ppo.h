@@ -1,0 +1,151 @@
+// PPO (clipped surrogate) as the authors ran it (OpenAI Baselines PPO2, notes §8.1), on Eigen.
+//
+//   learner = PpoLearner(PolicyConfig::Subtask(57), PpoConfig::Subtask(), seed);
+//   loop: rollouts from actors (PolicyRunner + Rollout) ->
+//         stats = learner.Update(rollouts)   (also merges each rollout's obs_stats_delta) ->
+//         learner.ExportWeights(&msg) and broadcast.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "common/json_util.h"
+#include "common/rng.h"
+#include "learner/adam.h"
+#include "learner/normalizer.h"
+#include "learner/policy.h"
+#include "learner/rollout.h"
+
+namespace perch {
+
+namespace proto {
+class ModelWeights;
+class LearnerState;
+}  // namespace proto
+
+// Every value is a config field. Defaults: paper Table 2 (subtasks) and notes §8.1.
+struct PpoConfig {
+  int steps_per_update = 8192;  // nsteps: samples per update (the learner waits for this many)
+  int num_minibatches = 32;     // minibatch = 256
+  int num_epochs = 4;
+  float learning_rate = 1e-4f;  // constant
+  float gamma = 0.99f;
+  float gae_lambda = 0.95f;
+  float clip_range = 0.2f;
+  float value_coef = 0.5f;
+  bool clip_value = true;  // authors' value clipping, same range as the policy
+  float value_clip_range = 0.2f;
+  float entropy_coef = 0.0f;
+  float max_grad_norm = 0.5f;  // global L2 norm; <= 0 disables
+  float adam_beta1 = 0.9f;
+  float adam_beta2 = 0.999f;
+  float adam_eps = 1e-5f;
+  bool normalize_advantages = true;  // per minibatch, (A - mean) / (std + 1e-8)
+  float advantage_eps = 1e-8f;
+  // DEVELOPERS.md: bootstrap on truncation. The authors treated the time limit as terminal (false).
+  bool bootstrap_on_truncation = true;
+  NormalizerConfig obs_norm;
+  RewardScalingConfig reward_scaling;
+
+  static PpoConfig Subtask();  // 8192 / 32 / 4 / 1e-4
+  static PpoConfig Meta();     // 64 / 8 / 2 / 1e-4
+};
+Json ToJson(const PpoConfig& c);
+PpoConfig PpoConfigFromJson(const Json& j, const std::string& ctx);  // strict
+
+// Means over all minibatches of all epochs of one update, except where noted.
+struct UpdateStats {
+  int num_samples = 0;
+  int num_minibatch_steps = 0;
+  float policy_loss = 0.0f;  // clipped surrogate (to minimize)
+  float value_loss = 0.0f;   // 0.5 * mean of (clipped) squared error, before value_coef
+  float entropy = 0.0f;
+  float approx_kl = 0.0f;           // 0.5 * mean (log ratio)^2, as Baselines
+  float clip_fraction = 0.0f;       // fraction with |ratio - 1| > clip_range
+  float grad_norm = 0.0f;           // before clipping
+  float explained_variance = 0.0f;  // of the values before the update vs returns
+  float mean_reward = 0.0f;         // raw rewards of the batch
+  float mean_scaled_reward = 0.0f;
+  float mean_advantage = 0.0f;  // before normalization
+  float mean_return = 0.0f;     // GAE targets
+  float log_std_mean = 0.0f;    // after the update
+};
+Json ToJson(const UpdateStats& s);
+
+// The PPO objective on one minibatch (advantages already normalized):
+//   total = policy_loss - entropy_coef * entropy + value_coef * value_loss
+//   policy_loss = mean max(-A r, -A clip(r, 1 +- clip_range)), r = exp(logp - old_logp)
+//   value_loss = 0.5 mean max((v - R)^2, (old_v + clip(v - old_v, +-value_clip_range) - R)^2)
+//                (without the clipped term when !clip_value)
+struct PpoLossTerms {
+  double total = 0, policy_loss = 0, value_loss = 0, entropy = 0, approx_kl = 0, clip_fraction = 0;
+};
+struct PpoLossWorkspace {
+  PolicyEvalCache eval;
+  VectorXf dlogp, dent, dval;  // [B]
+};
+// Evaluates the loss at `params`; when grad != nullptr adds d total / d params into grad.
+PpoLossTerms PpoLoss(const ActorCritic& model, const float* params, const PpoConfig& cfg,
+                     const Eigen::Ref<const MatrixXf>& obs,
+                     const Eigen::Ref<const MatrixXf>& actions,
+                     const Eigen::Ref<const VectorXf>& old_logp,
+                     const Eigen::Ref<const VectorXf>& old_value,
+                     const Eigen::Ref<const VectorXf>& adv, const Eigen::Ref<const VectorXf>& ret,
+                     PpoLossWorkspace* ws, float* grad);
+
+class PpoLearner {
+ public:
+  PpoLearner(const PolicyConfig& policy, const PpoConfig& ppo, uint64_t seed);
+
+  const PpoConfig& config() const { return ppo_; }
+  const ActorCritic& model() const { return model_; }
+  ActorCritic& model() { return model_; }
+  ObsNormalizer& obs_normalizer() { return obs_norm_; }
+  const ObsNormalizer& obs_normalizer() const { return obs_norm_; }
+  RewardScaler& reward_scaler() { return reward_scaler_; }
+  const Adam& optimizer() const { return adam_; }
+  int64_t num_updates() const { return num_updates_; }
+  int64_t num_samples() const { return num_samples_; }
+
+  // Merges an actor's raw-observation statistics into the master ones (Update() does this for
+  // each rollout's obs_stats_delta; call it only for statistics that travel otherwise).
+  void AddObsStats(const RunningMeanStd& delta);
+
+  // One PPO update: merges the rollouts' obs_stats_delta, reward scaling (in place on a copy, per
+  // stream in order), GAE per segment, then num_epochs passes over shuffled minibatches. Segments
+  // are validated first (ConfigError). Any total size works; minibatches split it as evenly as
+  // possible.
+  UpdateStats Update(const std::vector<Rollout>& rollouts);
+
+  // Weights + obs stats for actors (version = num_updates()).
+  void ExportWeights(proto::ModelWeights* w) const;
+  // Everything: weights, Adam, reward-scaler, RNG, counters. Resuming gives identical updates.
+  void ExportState(proto::LearnerState* s) const;
+  // ConfigError "ctx: ..." on another network shape or inconsistent sizes; nothing changes then.
+  void ImportWeights(const proto::ModelWeights& w, const std::string& ctx);
+  void ImportState(const proto::LearnerState& s, const std::string& ctx);
+
+ private:
+  PolicyConfig policy_config_;
+  PpoConfig ppo_;
+  ActorCritic model_;
+  ObsNormalizer obs_norm_;
+  RewardScaler reward_scaler_;
+  Adam adam_;
+  Rng rng_;
+  int64_t num_updates_ = 0;
+  int64_t num_samples_ = 0;
+
+  // Flattened batch and minibatch buffers, reused across updates (no allocation once warm).
+  MatrixXf obs_, actions_;  // [obs_dim x N], [action_size x N]
+  VectorXf old_logp_, old_value_, adv_, ret_;
+  std::vector<int> perm_;
+  MatrixXf mb_obs_, mb_act_;
+  VectorXf mb_logp_, mb_value_, mb_adv_, mb_ret_;
+  VectorXf grad_;
+  PpoLossWorkspace ws_;
+  std::vector<float> scaled_rewards_, seg_adv_, seg_ret_;
+};
+
+}  // namespace perch
