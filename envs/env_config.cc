@@ -1,0 +1,198 @@
+#include "envs/env_config.h"
+
+#include <cmath>
+
+namespace perch {
+namespace {
+
+std::string Resolve(const std::string& path) {
+  if (path.empty() || path[0] == '/') return path;
+  return std::string(PERCH_SOURCE_DIR) + "/" + path;
+}
+
+void CheckRange(const std::array<double, 2>& r, const std::string& where) {
+  if (!(r[0] >= 0.0 && r[0] <= r[1] && r[1] <= 180.0)) {
+    throw ConfigError(where + ": expected 0 <= lo <= hi <= 180 degrees");
+  }
+}
+
+}  // namespace
+
+EnvConfig EnvConfig::Load(const std::string& path) { return FromJson(LoadJsonFile(path), path); }
+
+EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
+  CheckKnownKeys(j,
+                 {"_comment", "humanoid_file", "chair", "chair_placement", "physics", "action_mode",
+                  "pd_implicit", "obs_layout", "obs", "spawn", "init", "safety", "seat_contact_max_pelvis_z",
+                  "task", "stand"},
+                 ctx);
+  EnvConfig c;
+  GetOptional(j, "humanoid_file", c.humanoid_file, ctx);
+  GetOptional(j, "chair", c.chair, ctx);
+  if (j.contains("chair_placement")) {
+    const Json& p = j["chair_placement"];
+    const std::string pc = ctx + ".chair_placement";
+    CheckKnownKeys(p, {"x", "y", "yaw_deg"}, pc);
+    GetOptional(p, "x", c.chair_placement.x, pc);
+    GetOptional(p, "y", c.chair_placement.y, pc);
+    double yaw_deg = c.chair_placement.yaw * 180.0 / M_PI;
+    GetOptional(p, "yaw_deg", yaw_deg, pc);
+    c.chair_placement.yaw = yaw_deg * M_PI / 180.0;
+  }
+  if (j.contains("physics")) c.physics = PhysicsConfig::FromJson(j["physics"], ctx + ".physics");
+  std::string mode = "torque";
+  GetOptional(j, "action_mode", mode, ctx);
+  if (mode == "torque") {
+    c.action_mode = ActionMode::kTorque;
+  } else if (mode == "pd") {
+    c.action_mode = ActionMode::kPd;
+  } else {
+    throw ConfigError(ctx + ".action_mode: expected \"torque\" or \"pd\", got \"" + mode + "\"");
+  }
+  GetOptional(j, "pd_implicit", c.pd_implicit, ctx);
+  std::string layout = "proprio_goal";
+  GetOptional(j, "obs_layout", layout, ctx);
+  if (layout == "proprio_goal") {
+    c.obs_layout = ObsLayout::kProprioGoal;
+  } else if (layout == "proprio_chair") {
+    c.obs_layout = ObsLayout::kProprioChair;
+  } else {
+    throw ConfigError(ctx + ".obs_layout: expected \"proprio_goal\" or \"proprio_chair\", got \"" +
+                      layout + "\"");
+  }
+  if (j.contains("obs")) {
+    const Json& o = j["obs"];
+    const std::string oc = ctx + ".obs";
+    CheckKnownKeys(o, {"initial_z", "velocity_scale", "joint_speed_scale", "clip", "foot_contact_lag"},
+                   oc);
+    GetOptional(o, "initial_z", c.obs.initial_z, oc);
+    GetOptional(o, "velocity_scale", c.obs.velocity_scale, oc);
+    GetOptional(o, "joint_speed_scale", c.obs.joint_speed_scale, oc);
+    GetOptional(o, "clip", c.obs.clip, oc);
+    GetOptional(o, "foot_contact_lag", c.obs.foot_contact_lag, oc);
+    if (!(c.obs.clip > 0.0)) throw ConfigError(oc + ".clip: must be > 0");
+  }
+  if (j.contains("spawn")) {
+    const Json& s = j["spawn"];
+    const std::string sc = ctx + ".spawn";
+    CheckKnownKeys(s,
+                   {"zone", "x", "y", "yaw_deg", "center_x", "center_y", "radius", "zone1_deg",
+                    "zone2_deg", "zone3_deg"},
+                   sc);
+    GetOptional(s, "zone", c.spawn.zone, sc);
+    GetOptional(s, "x", c.spawn.x, sc);
+    GetOptional(s, "y", c.spawn.y, sc);
+    GetOptional(s, "yaw_deg", c.spawn.yaw_deg, sc);
+    GetOptional(s, "center_x", c.spawn.center_x, sc);
+    GetOptional(s, "center_y", c.spawn.center_y, sc);
+    GetOptional(s, "radius", c.spawn.radius, sc);
+    GetOptional(s, "zone1_deg", c.spawn.zone1_deg, sc);
+    GetOptional(s, "zone2_deg", c.spawn.zone2_deg, sc);
+    GetOptional(s, "zone3_deg", c.spawn.zone3_deg, sc);
+    if (c.spawn.zone < 0 || c.spawn.zone > 3) throw ConfigError(sc + ".zone: expected 0, 1, 2 or 3");
+    if (!(c.spawn.radius >= 0.0)) throw ConfigError(sc + ".radius: must be >= 0");
+    CheckRange(c.spawn.zone1_deg, sc + ".zone1_deg");
+    CheckRange(c.spawn.zone2_deg, sc + ".zone2_deg");
+    CheckRange(c.spawn.zone3_deg, sc + ".zone3_deg");
+  }
+  if (j.contains("init")) {
+    const Json& i = j["init"];
+    const std::string ic = ctx + ".init";
+    CheckKnownKeys(i, {"qpos_file", "qpos_array", "qpos_row", "standing_clearance"}, ic);
+    GetOptional(i, "qpos_file", c.init.qpos_file, ic);
+    GetOptional(i, "qpos_array", c.init.qpos_array, ic);
+    GetOptional(i, "qpos_row", c.init.qpos_row, ic);
+    GetOptional(i, "standing_clearance", c.init.standing_clearance, ic);
+    if (c.init.qpos_row < 0) throw ConfigError(ic + ".qpos_row: must be >= 0");
+  }
+  if (j.contains("safety")) {
+    const Json& s = j["safety"];
+    const std::string sc = ctx + ".safety";
+    CheckKnownKeys(s, {"max_joint_speed", "max_root_speed", "max_root_ang_speed", "max_abs_position"},
+                   sc);
+    GetOptional(s, "max_joint_speed", c.safety.max_joint_speed, sc);
+    GetOptional(s, "max_root_speed", c.safety.max_root_speed, sc);
+    GetOptional(s, "max_root_ang_speed", c.safety.max_root_ang_speed, sc);
+    GetOptional(s, "max_abs_position", c.safety.max_abs_position, sc);
+  }
+  GetOptional(j, "seat_contact_max_pelvis_z", c.seat_contact_max_pelvis_z, ctx);
+  GetOptional(j, "task", c.task, ctx);
+  if (c.task != "stand") throw ConfigError(ctx + ".task: unknown task \"" + c.task + "\" (known: stand)");
+  if (j.contains("stand")) {
+    const Json& s = j["stand"];
+    const std::string sc = ctx + ".stand";
+    CheckKnownKeys(s,
+                   {"alive_bonus", "upright_weight", "action_cost", "min_torso_z",
+                    "max_episode_steps", "walk_target"},
+                   sc);
+    GetOptional(s, "alive_bonus", c.stand.alive_bonus, sc);
+    GetOptional(s, "upright_weight", c.stand.upright_weight, sc);
+    GetOptional(s, "action_cost", c.stand.action_cost, sc);
+    GetOptional(s, "min_torso_z", c.stand.min_torso_z, sc);
+    GetOptional(s, "max_episode_steps", c.stand.max_episode_steps, sc);
+    GetOptional(s, "walk_target", c.stand.walk_target, sc);
+    if (c.stand.max_episode_steps < 1) throw ConfigError(sc + ".max_episode_steps: must be >= 1");
+  }
+  return c;
+}
+
+Json EnvConfig::ToJson() const {
+  return Json{
+      {"humanoid_file", humanoid_file},
+      {"chair", chair},
+      {"chair_placement",
+       {{"x", chair_placement.x}, {"y", chair_placement.y}, {"yaw_deg", chair_placement.yaw * 180.0 / M_PI}}},
+      {"physics", physics.ToJson()},
+      {"action_mode", action_mode == ActionMode::kTorque ? "torque" : "pd"},
+      {"pd_implicit", pd_implicit},
+      {"obs_layout", obs_layout == ObsLayout::kProprioGoal ? "proprio_goal" : "proprio_chair"},
+      {"obs",
+       {{"initial_z", obs.initial_z},
+        {"velocity_scale", obs.velocity_scale},
+        {"joint_speed_scale", obs.joint_speed_scale},
+        {"clip", obs.clip},
+        {"foot_contact_lag", obs.foot_contact_lag}}},
+      {"spawn",
+       {{"zone", spawn.zone},
+        {"x", spawn.x},
+        {"y", spawn.y},
+        {"yaw_deg", spawn.yaw_deg},
+        {"center_x", spawn.center_x},
+        {"center_y", spawn.center_y},
+        {"radius", spawn.radius},
+        {"zone1_deg", spawn.zone1_deg},
+        {"zone2_deg", spawn.zone2_deg},
+        {"zone3_deg", spawn.zone3_deg}}},
+      {"init",
+       {{"qpos_file", init.qpos_file},
+        {"qpos_array", init.qpos_array},
+        {"qpos_row", init.qpos_row},
+        {"standing_clearance", init.standing_clearance}}},
+      {"safety",
+       {{"max_joint_speed", safety.max_joint_speed},
+        {"max_root_speed", safety.max_root_speed},
+        {"max_root_ang_speed", safety.max_root_ang_speed},
+        {"max_abs_position", safety.max_abs_position}}},
+      {"seat_contact_max_pelvis_z", seat_contact_max_pelvis_z},
+      {"task", task},
+      {"stand",
+       {{"alive_bonus", stand.alive_bonus},
+        {"upright_weight", stand.upright_weight},
+        {"action_cost", stand.action_cost},
+        {"min_torso_z", stand.min_torso_z},
+        {"max_episode_steps", stand.max_episode_steps},
+        {"walk_target", stand.walk_target}}},
+  };
+}
+
+std::string EnvConfig::HumanoidPath() const { return Resolve(humanoid_file); }
+
+std::string EnvConfig::ChairPath() const {
+  if (chair == "none") return "";
+  if (chair.size() > 5 && chair.substr(chair.size() - 5) == ".json") return Resolve(chair);
+  return Chair::PresetPath(chair);
+}
+
+std::string EnvConfig::QposPath() const { return Resolve(init.qpos_file); }
+
+}  // namespace perch

@@ -1,0 +1,97 @@
+// Typed configuration of the humanoid-chair env. Defaults are the paper's / the authors' values
+// (docs/env.md says where each comes from). Read from JSON strictly, written back in full.
+#pragma once
+
+#include <array>
+#include <string>
+
+#include "common/json_util.h"
+#include "envs/humanoid_world.h"
+
+namespace perch {
+
+enum class ActionMode {
+  kTorque,  // authors: torque = max_torque x clip(a, -1, 1), held over the physics sub-steps
+  kPd,      // a in [-1, 1] -> target angle mid + a (hi - lo) / 2; PD torque every physics step
+};
+
+enum class ObsLayout {
+  kProprioGoal,   // more(6) joints(42) feet(2) goal(2): 52, walk / turn policies
+  kProprioChair,  // more(6) joints(42) feet(2) chair(7): 57, sit / meta policies
+};
+
+struct ObsConfig {
+  double initial_z = 0.8;          // subtracted from torso z (authors' "initial_z") [m]
+  double velocity_scale = 0.3;     // torso velocity feature scale [s/m]
+  double joint_speed_scale = 0.1;  // qdot_n = scale x qdot [s/rad]
+  double clip = 5.0;               // every feature is clipped to [-clip, clip]
+  bool foot_contact_lag = true;    // authors: the flags in an observation are one step old
+};
+
+// Spawn positions in the chair frame (notes 6). zone 0: the fixed pose below; zones 1-3: on a
+// circle around `center`, azimuth theta with |theta| uniform in the zone's [lo, hi] degrees and a
+// random sign, facing the centre (yaw added = theta + pi to the initial pose's own yaw).
+struct SpawnConfig {
+  int zone = 0;
+  double x = 1.5, y = 0.0, yaw_deg = 180.0;  // zone 0 [m, m, deg]
+  double center_x = 0.45, center_y = 0.0;    // authors' Zone 1 centre [m]
+  double radius = 1.5;                       // [m]
+  std::array<double, 2> zone1_deg{0.0, 90.0};    // authors' code: theta ~ U(-90, 90) deg
+  std::array<double, 2> zone2_deg{90.0, 135.0};  // our proposal (notes 6): lateral sides
+  std::array<double, 2> zone3_deg{135.0, 180.0};  // our proposal: rear side
+};
+
+// The initial pose that spawning moves around: standing (all angles 0 clipped to the limits),
+// or a row of a 51-column qpos array in an npz file (notes 7.2), e.g. the authors' Zone 1 start
+// frame: cmu_mocap_walk_plain.npz, qpos_03, row 31.
+struct InitConfig {
+  std::string qpos_file;                 // empty: standing pose
+  std::string qpos_array = "qpos_03";
+  int qpos_row = 31;
+  double standing_clearance = 0.002;     // feet above the floor at a standing start [m]
+};
+
+struct SafetyConfig {
+  double max_joint_speed = 60.0;      // [rad/s]; beyond: invalid episode
+  double max_root_speed = 10.0;       // [m/s] (falling from 1.3 m: 5 m/s)
+  double max_root_ang_speed = 60.0;   // [rad/s]
+  double max_abs_position = 1000.0;   // [m]
+};
+
+// The `stand` task: reward for staying upright, early termination on falling, time limit.
+struct StandTaskConfig {
+  double alive_bonus = 1.0;        // per control step while up
+  double upright_weight = 1.0;     // x (torso up-vector z), in [-1, 1]
+  double action_cost = 0.01;       // x mean(a^2)
+  double min_torso_z = 0.78;       // authors' alive test: torso z > 0.78 m
+  int max_episode_steps = 1000;    // 16.5 s
+  std::array<double, 2> walk_target{1000.0, 0.0};  // goal features: Roboschool's default [m]
+};
+
+struct EnvConfig {
+  std::string humanoid_file = "data/humanoid.json";  // relative paths: from the source tree
+  std::string chair = "authors";  // a preset in data/chairs/, a path to a .json, or "none"
+  ChairPlacement chair_placement;
+  PhysicsConfig physics;
+  ActionMode action_mode = ActionMode::kTorque;
+  // pd mode: damp implicitly per joint (docs/env.md); false = the plain explicit PD law.
+  bool pd_implicit = true;
+  ObsLayout obs_layout = ObsLayout::kProprioGoal;
+  ObsConfig obs;
+  SpawnConfig spawn;
+  InitConfig init;
+  SafetyConfig safety;
+  double seat_contact_max_pelvis_z = 0.54;  // contact = pelvis touches chair AND pelvis z < this
+  std::string task = "stand";
+  StandTaskConfig stand;
+
+  static EnvConfig FromJson(const Json& j, const std::string& ctx);
+  static EnvConfig Load(const std::string& path);
+  Json ToJson() const;
+  // Paths resolved against the source tree when relative.
+  std::string HumanoidPath() const;
+  std::string ChairPath() const;  // empty for "none"
+  std::string QposPath() const;
+};
+
+}  // namespace perch

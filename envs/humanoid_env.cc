@@ -1,0 +1,337 @@
+#include "envs/humanoid_env.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "common/npz.h"
+#include "envs/spawn.h"
+
+namespace perch {
+namespace {
+
+// Backward pelvis tilt of SeatedPose [rad]: enough for the butt capsule to reach below the thighs.
+constexpr double kSeatedPelvisTilt = 0.8;
+
+float Clip(double v, double c) {
+  if (!std::isfinite(v)) return 0.0f;  // non-finite values are flagged invalid, never passed on
+  return static_cast<float>(std::clamp(v, -c, c));
+}
+
+HumanoidState LoadInitPose(const EnvConfig& c, const HumanoidModel& model) {
+  if (c.init.qpos_file.empty()) return StandingPose(model, c.init.standing_clearance);
+  const std::string path = c.QposPath();
+  const auto arrays = LoadNpz(path);
+  const auto it = arrays.find(c.init.qpos_array);
+  if (it == arrays.end()) {
+    throw ConfigError(path + ": no array '" + c.init.qpos_array + "' (config init.qpos_array)");
+  }
+  const NpyArray& a = it->second;
+  if (a.shape.empty() || a.shape.back() != 51) {
+    throw ConfigError(path + ": array '" + c.init.qpos_array + "' is not a 51-column qpos array");
+  }
+  const int64_t rows = a.size() / 51;
+  if (c.init.qpos_row >= rows) {
+    throw ConfigError(path + ": init.qpos_row " + std::to_string(c.init.qpos_row) + " beyond " +
+                      std::to_string(rows) + " rows");
+  }
+  return StateFromQpos(a.values.data() + 51 * c.init.qpos_row);
+}
+
+}  // namespace
+
+// ---- stand task ------------------------------------------------------------------------------
+
+class StandTask : public Task {
+ public:
+  explicit StandTask(const StandTaskConfig& c) : c_(c) {}
+  const char* name() const override { return "stand"; }
+  int max_episode_steps() const override { return c_.max_episode_steps; }
+  void OnReset(HumanoidChairEnv& env, Rng& rng) override {
+    env.SetWalkTarget(Eigen::Vector2d(c_.walk_target[0], c_.walk_target[1]));
+  }
+  TaskStep OnStep(const HumanoidChairEnv& env, const float* action) override {
+    TaskStep r;
+    const HumanoidState& s = env.humanoid_state();
+    const double up_z = (s.root_quat * Eigen::Vector3d::UnitZ()).z();
+    double a2 = 0.0;
+    const int n = env.model().num_joints();
+    for (int i = 0; i < n; ++i) a2 += static_cast<double>(action[i]) * action[i];
+    r.terminated = s.root_pos.z() < c_.min_torso_z;
+    r.reward = static_cast<float>(c_.alive_bonus + c_.upright_weight * up_z - c_.action_cost * a2 / n);
+    return r;
+  }
+
+ private:
+  StandTaskConfig c_;
+};
+
+std::unique_ptr<Task> MakeTask(const EnvConfig& config) {
+  if (config.task == "stand") return std::make_unique<StandTask>(config.stand);
+  throw ConfigError("task: unknown task \"" + config.task + "\"");
+}
+
+// ---- poses -----------------------------------------------------------------------------------
+
+HumanoidState StandingPose(const HumanoidModel& model, double clearance) {
+  HumanoidState s;
+  for (int j = 0; j < model.num_joints(); ++j) {
+    s.q[j] = std::clamp(0.0, model.joint(j).lower, model.joint(j).upper);
+  }
+  const FkResult fk = ForwardKinematics(model, Eigen::Vector3d::Zero(),
+                                        Eigen::Quaterniond::Identity(), s.q.data());
+  s.root_pos = Eigen::Vector3d(0, 0, clearance - LowestGeomZ(model, fk));
+  return s;
+}
+
+HumanoidState SeatedPose(const HumanoidModel& model, const Chair& chair,
+                         const ChairPlacement& placement, double clearance) {
+  HumanoidState s;
+  for (int j = 0; j < model.num_joints(); ++j) {
+    s.q[j] = std::clamp(0.0, model.joint(j).lower, model.joint(j).upper);
+  }
+  // The pelvis tilts back (abdomen flexed) so that the butt, not only the thighs, rests on the
+  // seat; the hips flex less by the same angle, keeping the thighs level and the shins vertical.
+  const double tilt = kSeatedPelvisTilt;
+  s.q[model.FindJoint("abdomen_y")] = -tilt;
+  for (const char* name : {"right_hip_y", "left_hip_y"}) s.q[model.FindJoint(name)] = -M_PI / 2 + tilt;
+  for (const char* name : {"right_knee", "left_knee"}) s.q[model.FindJoint(name)] = -M_PI / 2;
+  // Lowest point of the pelvis and thighs `clearance` above the seat top; pelvis over the target.
+  const FkResult fk = ForwardKinematics(model, Eigen::Vector3d::Zero(),
+                                        Eigen::Quaterniond::Identity(), s.q.data());
+  const int pelvis = model.pelvis_body();
+  double low = 1e9;
+  for (int b : {pelvis, model.FindBody("right_thigh"), model.FindBody("left_thigh")}) {
+    for (const Geom& g : model.body(b).geoms) {
+      low = std::min(low, std::min((fk.body_world[b] * g.from).z(), (fk.body_world[b] * g.to).z()) -
+                              g.radius);
+    }
+  }
+  const Eigen::Vector3d pelvis_pos = fk.body_world[pelvis].translation();
+  double x = chair.seat_target.x() - pelvis_pos.x();
+  // Keep the trunk in front of a backrest: rearmost point of torso, lwaist and pelvis.
+  for (const ChairBox& box : chair.boxes) {
+    if (box.role != "backrest") continue;
+    double rear = 1e9;
+    for (int b : {0, model.FindBody("lwaist"), pelvis}) {
+      for (const Geom& g : model.body(b).geoms) {
+        rear = std::min(rear, std::min((fk.body_world[b] * g.from).x(), (fk.body_world[b] * g.to).x()) -
+                                  g.radius);
+      }
+    }
+    x = std::max(x, box.max.x() + clearance - rear);
+  }
+  s.root_pos = Eigen::Vector3d(x, chair.seat_target.y() - pelvis_pos.y(),
+                               chair.seat_height() + clearance - low);
+  return TransformHorizontally(s, placement.yaw, placement.x, placement.y);
+}
+
+// ---- env -------------------------------------------------------------------------------------
+
+HumanoidChairEnv::HumanoidChairEnv(const EnvConfig& config)
+    : config_(config), model_(HumanoidModel::Load(config.HumanoidPath())) {
+  const std::string chair_path = config_.ChairPath();
+  if (!chair_path.empty()) chair_ = std::make_unique<Chair>(Chair::Load(chair_path));
+  world_ = std::make_unique<World>(model_, chair_.get(), config_.chair_placement, config_.physics);
+  task_ = MakeTask(config_);
+  init_pose_ = LoadInitPose(config_, model_);
+  body_pos_.resize(model_.num_bodies());
+  pd_ = std::make_unique<PdController>(model_, config_.physics.physics_dt, config_.pd_implicit);
+  BuildSpec();
+}
+
+HumanoidChairEnv::~HumanoidChairEnv() = default;
+
+void HumanoidChairEnv::BuildSpec() {
+  spec_.name = std::string("humanoid_chair_") + task_->name();
+  const bool chair_obs = config_.obs_layout == ObsLayout::kProprioChair;
+  spec_.obs_dim = kProprioDim + (chair_obs ? 7 : 2);
+  spec_.act_dim = model_.num_joints();
+  spec_.obs_low.assign(spec_.obs_dim, static_cast<float>(-config_.obs.clip));
+  spec_.obs_high.assign(spec_.obs_dim, static_cast<float>(config_.obs.clip));
+  spec_.act_low.assign(spec_.act_dim, -1.0f);
+  spec_.act_high.assign(spec_.act_dim, 1.0f);
+  spec_.obs_slices = {{"more", 0, 6}, {"joints", 6, 42}, {"feet", 48, 2}};
+  spec_.obs_slices.push_back(chair_obs ? ObsSlice{"chair", 50, 7} : ObsSlice{"goal", 50, 2});
+  spec_.control_dt = config_.physics.physics_dt * config_.physics.substeps;
+  spec_.max_episode_steps = task_->max_episode_steps();
+}
+
+void HumanoidChairEnv::Reset(float* obs) {
+  const SpawnPose spawn = SampleSpawn(config_.spawn, rng_);
+  ResetToState(PlaceAtSpawn(init_pose_, spawn, config_.chair_placement), obs);
+}
+
+void HumanoidChairEnv::ResetFromQpos(const double* qpos51, float* obs) {
+  ResetToState(StateFromQpos(qpos51), obs);
+}
+
+void HumanoidChairEnv::ResetToState(const HumanoidState& s, float* obs) {
+  world_->SetState(s);
+  step_ = 0;
+  foot_flags_ = {false, false};  // authors: zeros right after reset
+  tau_.fill(0.0);
+  AfterPhysics();
+  task_->OnReset(*this, rng_);
+  WriteObs(obs);
+}
+
+EnvState HumanoidChairEnv::GetState() const {
+  EnvState s;
+  s.world = world_->GetState();
+  s.foot_flags = foot_flags_;
+  s.step = step_;
+  s.walk_target = walk_target_;
+  return s;
+}
+
+void HumanoidChairEnv::SetState(const EnvState& s) {
+  world_->SetState(s.world);
+  foot_flags_ = s.foot_flags;
+  step_ = s.step;
+  walk_target_ = s.walk_target;
+  AfterPhysics();
+}
+
+void HumanoidChairEnv::HoldPoseAction(const double* q, float* action) const {
+  for (int a = 0; a < model_.num_joints(); ++a) {
+    const int j = model_.action_to_joint()[a];
+    action[a] = static_cast<float>(std::clamp(model_.joint(j).Normalize(q[j]), -1.0, 1.0));
+  }
+}
+
+void HumanoidChairEnv::ComputePdTorques(const float* a) {
+  double q[HumanoidModel::kNumJoints], qd[HumanoidModel::kNumJoints];
+  world_->ReadJoints(q, qd);
+  pd_->Torques(a, q, qd, tau_.data());
+}
+
+StepResult HumanoidChairEnv::Step(const float* action, float* obs) {
+  const int n = model_.num_joints();
+  for (int i = 0; i < n; ++i) {
+    const float a = action[i];
+    action_clipped_[i] = std::isfinite(a) ? std::clamp(a, -1.0f, 1.0f) : 0.0f;
+  }
+  if (config_.action_mode == ActionMode::kTorque) {
+    for (int i = 0; i < n; ++i) {
+      const int j = model_.action_to_joint()[i];
+      tau_[j] = model_.joint(j).max_torque * action_clipped_[i];
+    }
+    world_->SetJointTorques(tau_.data());
+    for (int s = 0; s < config_.physics.substeps; ++s) world_->StepPhysics();
+  } else {
+    for (int s = 0; s < config_.physics.substeps; ++s) {
+      ComputePdTorques(action_clipped_.data());
+      world_->SetJointTorques(tau_.data());
+      world_->StepPhysics();
+    }
+  }
+  ++step_;
+  AfterPhysics();
+  StepResult r;
+  if (StateInvalid()) {
+    r.invalid = true;
+    r.terminated = true;
+    r.reward = 0.0f;
+    WriteObs(obs);
+    return r;
+  }
+  WriteObs(obs);  // builds with the previous step's foot flags when lagged
+  const TaskStep t = task_->OnStep(*this, action);
+  r.reward = t.reward;
+  r.terminated = t.terminated;
+  r.truncated = !r.terminated && step_ >= task_->max_episode_steps();
+  return r;
+}
+
+void HumanoidChairEnv::AfterPhysics() {
+  const WorldState ws = world_->GetState();
+  state_ = ws.humanoid;
+  rpy_ = RpyFromQuat(state_.root_quat);
+  for (int b = 0; b < model_.num_bodies(); ++b) body_pos_[b] = world_->BodyPose(b).translation();
+  contacts_ = world_->ReadContacts();
+}
+
+bool HumanoidChairEnv::StateInvalid() const {
+  const SafetyConfig& c = config_.safety;
+  const HumanoidState& s = state_;
+  if (!s.root_pos.allFinite() || !s.root_lin_vel.allFinite() || !s.root_ang_vel.allFinite() ||
+      !s.root_quat.coeffs().allFinite()) {
+    return true;
+  }
+  if (s.root_pos.cwiseAbs().maxCoeff() > c.max_abs_position) return true;
+  if (s.root_lin_vel.norm() > c.max_root_speed || s.root_ang_vel.norm() > c.max_root_ang_speed) {
+    return true;
+  }
+  for (int j = 0; j < model_.num_joints(); ++j) {
+    if (!std::isfinite(s.q[j]) || !std::isfinite(s.qd[j]) || std::abs(s.qd[j]) > c.max_joint_speed) {
+      return true;
+    }
+  }
+  return false;
+}
+
+bool HumanoidChairEnv::PelvisSeatContact() const {
+  return contacts_.pelvis_chair && PelvisPosition().z() < config_.seat_contact_max_pelvis_z;
+}
+
+double HumanoidChairEnv::PelvisSeatDistance() const {
+  return (PelvisPosition() - world_->SeatTargetWorld()).norm();
+}
+
+Eigen::Vector3d HumanoidChairEnv::BodyXyz() const {
+  Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+  for (int b = 1; b < model_.num_bodies(); ++b) sum += body_pos_[b].head<2>();
+  sum /= (model_.num_bodies() - 1);
+  return Eigen::Vector3d(sum.x(), sum.y(), state_.root_pos.z());
+}
+
+void HumanoidChairEnv::WriteObs(float* obs) {
+  const ObsConfig& oc = config_.obs;
+  const double clip = oc.clip;
+  const HumanoidState& s = state_;
+  const double yaw = rpy_.z();
+  // more(6): height, roll, pitch, velocity in the heading frame.
+  const Eigen::Vector3d v = Eigen::AngleAxisd(-yaw, Eigen::Vector3d::UnitZ()) * s.root_lin_vel;
+  int k = 0;
+  obs[k++] = Clip(s.root_pos.z() - oc.initial_z, clip);
+  obs[k++] = Clip(rpy_.x(), clip);
+  obs[k++] = Clip(rpy_.y(), clip);
+  for (int i = 0; i < 3; ++i) obs[k++] = Clip(oc.velocity_scale * v[i], clip);
+  // joints(42): (q_n, 0.1 qdot) in observation order.
+  for (int j = 0; j < model_.num_joints(); ++j) {
+    obs[k++] = Clip(model_.joint(j).Normalize(s.q[j]), clip);
+    obs[k++] = Clip(oc.joint_speed_scale * s.qd[j], clip);
+  }
+  // feet(2): [right, left] floor contact, one step late when lagged (notes 1.5).
+  const std::array<bool, 2> now = {contacts_.foot_floor[0], contacts_.foot_floor[1]};
+  const std::array<bool, 2>& shown = oc.foot_contact_lag ? foot_flags_ : now;
+  obs[k++] = shown[0] ? 1.0f : 0.0f;
+  obs[k++] = shown[1] ? 1.0f : 0.0f;
+  foot_flags_ = now;
+  if (config_.obs_layout == ObsLayout::kProprioGoal) {
+    // goal(2): sin, cos of the walk target's azimuth relative to the heading.
+    const Eigen::Vector3d b = BodyXyz();
+    const double psi = std::atan2(walk_target_.y() - b.y(), walk_target_.x() - b.x()) - yaw;
+    obs[k++] = Clip(std::sin(psi), clip);
+    obs[k++] = Clip(std::cos(psi), clip);
+  } else {
+    // chair(7): pelvis -> seat target in the torso frame; conjugate torso quaternion relative to
+    // the chair frame (= world for the authors' unrotated chair), x y z w with w >= 0.
+    const Eigen::Vector3d p = s.root_quat.conjugate() * (world_->SeatTargetWorld() - PelvisPosition());
+    for (int i = 0; i < 3; ++i) obs[k++] = Clip(p[i], clip);
+    const Eigen::Quaterniond chair_rot(
+        Eigen::AngleAxisd(config_.chair_placement.yaw, Eigen::Vector3d::UnitZ()));
+    Eigen::Quaterniond rel = (chair_rot.conjugate() * s.root_quat).conjugate();
+    if (rel.w() < 0) rel.coeffs() *= -1.0;
+    obs[k++] = Clip(rel.x(), clip);
+    obs[k++] = Clip(rel.y(), clip);
+    obs[k++] = Clip(rel.z(), clip);
+    obs[k++] = Clip(rel.w(), clip);
+  }
+}
+
+std::unique_ptr<Env> MakeEnv(const EnvConfig& config) {
+  return std::make_unique<HumanoidChairEnv>(config);
+}
+
+}  // namespace perch

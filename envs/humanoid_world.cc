@@ -1,0 +1,519 @@
+#include "envs/humanoid_world.h"
+
+#include <cmath>
+
+#include <btBulletDynamicsCommon.h>
+#include <BulletDynamics/Featherstone/btMultiBody.h>
+#include <BulletDynamics/Featherstone/btMultiBodyConstraintSolver.h>
+#include <BulletDynamics/Featherstone/btMultiBodyDynamicsWorld.h>
+#include <BulletDynamics/Featherstone/btMultiBodyJointLimitConstraint.h>
+#include <BulletDynamics/Featherstone/btMultiBodyLink.h>
+#include <BulletDynamics/Featherstone/btMultiBodyLinkCollider.h>
+
+#include "envs/pd_controller.h"
+
+namespace perch {
+namespace {
+
+// Tags in btCollisionObject::userIndex, to classify contacts.
+enum ObjectKind { kFloor = 1, kChair = 2, kHumanoid = 3 };
+
+// Helper links are point-like; their inertia only has to keep the articulated inertia regular.
+constexpr double kHelperInertiaRadius = 0.01;  // [m]
+
+btVector3 Bt(const Eigen::Vector3d& v) { return btVector3(v.x(), v.y(), v.z()); }
+Eigen::Vector3d Ei(const btVector3& v) { return Eigen::Vector3d(v.x(), v.y(), v.z()); }
+btQuaternion Bt(const Eigen::Quaterniond& q) { return btQuaternion(q.x(), q.y(), q.z(), q.w()); }
+Eigen::Quaterniond Ei(const btQuaternion& q) { return Eigen::Quaterniond(q.w(), q.x(), q.y(), q.z()); }
+btTransform Bt(const Eigen::Isometry3d& t) {
+  return btTransform(Bt(Eigen::Quaterniond(t.rotation())), Bt(Eigen::Vector3d(t.translation())));
+}
+Eigen::Isometry3d Ei(const btTransform& t) {
+  Eigen::Isometry3d r = Eigen::Isometry3d::Identity();
+  r.translate(Ei(t.getOrigin()));
+  r.rotate(Ei(t.getRotation()).normalized());
+  return r;
+}
+
+// A body's link frame (Bullet's: at the com, along the principal axes) in its body frame.
+Eigen::Isometry3d InertialFrame(const Body& b) {
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  t.translate(b.com);
+  t.rotate(b.principal_rot);
+  return t;
+}
+
+Eigen::Isometry3d Translation(const Eigen::Vector3d& v) {
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  t.translate(v);
+  return t;
+}
+
+}  // namespace
+
+PhysicsConfig PhysicsConfig::FromJson(const Json& j, const std::string& ctx) {
+  CheckKnownKeys(j,
+                 {"physics_dt", "substeps", "gravity", "solver_iterations", "contact_erp",
+                  "floor_friction", "humanoid_friction", "chair_friction", "linear_damping",
+                  "angular_damping", "contact_distance", "limit_margin"},
+                 ctx);
+  PhysicsConfig c;
+  GetOptional(j, "physics_dt", c.physics_dt, ctx);
+  GetOptional(j, "substeps", c.substeps, ctx);
+  GetOptional(j, "gravity", c.gravity, ctx);
+  GetOptional(j, "solver_iterations", c.solver_iterations, ctx);
+  GetOptional(j, "contact_erp", c.contact_erp, ctx);
+  GetOptional(j, "floor_friction", c.floor_friction, ctx);
+  GetOptional(j, "humanoid_friction", c.humanoid_friction, ctx);
+  GetOptional(j, "chair_friction", c.chair_friction, ctx);
+  GetOptional(j, "linear_damping", c.linear_damping, ctx);
+  GetOptional(j, "angular_damping", c.angular_damping, ctx);
+  GetOptional(j, "contact_distance", c.contact_distance, ctx);
+  GetOptional(j, "limit_margin", c.limit_margin, ctx);
+  if (!(c.limit_margin >= 0.0)) throw ConfigError(ctx + ".limit_margin: must be >= 0");
+  if (!(c.physics_dt > 0.0 && c.physics_dt < 0.1)) throw ConfigError(ctx + ".physics_dt: must be in (0, 0.1) s");
+  if (c.substeps < 1) throw ConfigError(ctx + ".substeps: must be >= 1");
+  if (c.solver_iterations < 1) throw ConfigError(ctx + ".solver_iterations: must be >= 1");
+  if (!(c.contact_erp > 0.0 && c.contact_erp <= 1.0)) throw ConfigError(ctx + ".contact_erp: must be in (0, 1]");
+  for (double f : {c.floor_friction, c.humanoid_friction, c.chair_friction}) {
+    if (!(f >= 0.0)) throw ConfigError(ctx + ": frictions must be >= 0");
+  }
+  return c;
+}
+
+Json PhysicsConfig::ToJson() const {
+  return Json{{"physics_dt", physics_dt},
+              {"substeps", substeps},
+              {"gravity", gravity},
+              {"solver_iterations", solver_iterations},
+              {"contact_erp", contact_erp},
+              {"floor_friction", floor_friction},
+              {"humanoid_friction", humanoid_friction},
+              {"chair_friction", chair_friction},
+              {"linear_damping", linear_damping},
+              {"angular_damping", angular_damping},
+              {"contact_distance", contact_distance},
+              {"limit_margin", limit_margin}};
+}
+
+Eigen::Isometry3d ChairPlacement::Transform() const {
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  t.translate(Eigen::Vector3d(x, y, 0.0));
+  t.rotate(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()));
+  return t;
+}
+
+HumanoidState StateFromQpos(const double* qpos) {
+  HumanoidState s;
+  for (int j = 0; j < HumanoidModel::kNumJoints; ++j) {
+    s.q[j] = qpos[2 * j];
+    s.qd[j] = qpos[2 * j + 1];
+  }
+  s.root_pos = Eigen::Vector3d(qpos[42], qpos[43], qpos[44]);
+  s.root_quat = QuatFromRpy(qpos[45], qpos[46], qpos[47]);
+  s.root_lin_vel = Eigen::Vector3d(qpos[48], qpos[49], qpos[50]);
+  s.root_ang_vel.setZero();
+  return s;
+}
+
+void QposFromState(const HumanoidState& s, double* qpos) {
+  for (int j = 0; j < HumanoidModel::kNumJoints; ++j) {
+    qpos[2 * j] = s.q[j];
+    qpos[2 * j + 1] = s.qd[j];
+  }
+  const Eigen::Vector3d rpy = RpyFromQuat(s.root_quat);
+  for (int i = 0; i < 3; ++i) {
+    qpos[42 + i] = s.root_pos[i];
+    qpos[45 + i] = rpy[i];
+    qpos[48 + i] = s.root_lin_vel[i];
+  }
+}
+
+// Everything Bullet owns. Rebuilt from scratch on every SetState, as the authors reload the whole
+// world at every reset; this also makes a restored state independent of solver caches.
+struct World::Scene {
+  btDefaultCollisionConfiguration collision_config;
+  btCollisionDispatcher dispatcher{&collision_config};
+  btDbvtBroadphase broadphase;
+  btMultiBodyConstraintSolver solver;
+  btMultiBodyDynamicsWorld world{&dispatcher, &broadphase, &solver, &collision_config};
+  std::vector<std::unique_ptr<btCollisionShape>> shapes;
+  std::vector<std::unique_ptr<btCollisionObject>> objects;  // colliders, floor, chair
+  std::vector<std::unique_ptr<btMultiBodyConstraint>> constraints;  // [num_joints] joint limits
+  std::vector<char> limit_active;  // [num_joints] constraint currently in the world
+  std::unique_ptr<btMultiBody> body;
+  btRigidBody* chair = nullptr;  // owned by `objects`
+  std::vector<int> joint_link;   // [num_joints] link index of each joint
+  std::vector<int> body_link;    // [num_bodies] link carrying each body (-1: base)
+  std::vector<Eigen::Isometry3d> inertial_inv;  // [num_bodies] body frame in its link frame
+  btAlignedObjectArray<btQuaternion> scratch_q;
+  btAlignedObjectArray<btVector3> scratch_m;
+
+  ~Scene() {
+    for (size_t j = 0; j < constraints.size(); ++j) {
+      if (limit_active[j]) world.removeMultiBodyConstraint(constraints[j].get());
+    }
+    if (body) world.removeMultiBody(body.get());
+    for (auto& o : objects) {
+      if (auto* rb = btRigidBody::upcast(o.get())) {
+        world.removeRigidBody(rb);
+      } else {
+        world.removeCollisionObject(o.get());
+      }
+    }
+  }
+
+  btCollisionShape* Keep(btCollisionShape* s) {
+    shapes.emplace_back(s);
+    return s;
+  }
+};
+
+World::World(const HumanoidModel& model, const Chair* chair, const ChairPlacement& placement,
+             const PhysicsConfig& config)
+    : model_(model), chair_(chair), placement_(placement), config_(config) {
+  HumanoidState standing;
+  standing.root_pos = Eigen::Vector3d(0, 0, model.standing_root_height());
+  SetState(standing);
+}
+
+World::~World() = default;
+
+void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
+  scene_.reset();  // destroy the old world before building the new one
+  scene_ = std::make_unique<Scene>();
+  Scene& sc = *scene_;
+  sc.world.setGravity(btVector3(0, 0, -config_.gravity));
+  btContactSolverInfo& info = sc.world.getSolverInfo();
+  info.m_numIterations = config_.solver_iterations;
+  info.m_erp2 = config_.contact_erp;
+
+  // Floor: infinite plane z = 0.
+  {
+    auto* shape = sc.Keep(new btStaticPlaneShape(btVector3(0, 0, 1), 0));
+    btRigidBody::btRigidBodyConstructionInfo ci(0, nullptr, shape);
+    auto* floor = new btRigidBody(ci);
+    floor->setFriction(config_.floor_friction);
+    floor->setUserIndex(kFloor);
+    sc.objects.emplace_back(floor);
+    sc.world.addRigidBody(floor);
+  }
+
+  // Chair: one rigid body with a compound of boxes, frame at its com.
+  if (chair_) {
+    auto* compound = new btCompoundShape();
+    sc.Keep(compound);
+    for (const ChairBox& b : chair_->boxes) {
+      auto* box = sc.Keep(new btBoxShape(Bt(b.half_extents())));
+      compound->addChildShape(btTransform(btQuaternion::getIdentity(), Bt(b.center() - chair_->com)),
+                              box);
+    }
+    const double mass = chair_->dynamic ? chair_->mass : 0.0;
+    btVector3 inertia = chair_->dynamic ? Bt(chair_->inertia) : btVector3(0, 0, 0);
+    btRigidBody::btRigidBodyConstructionInfo ci(mass, nullptr, compound, inertia);
+    ci.m_friction = config_.chair_friction;
+    auto* rb = new btRigidBody(ci);
+    Eigen::Isometry3d frame = placement_.Transform();
+    if (chair_state) {
+      frame = Eigen::Isometry3d::Identity();
+      frame.translate(chair_state->pos);
+      frame.rotate(chair_state->quat.normalized());
+    }
+    rb->setWorldTransform(Bt(frame * Translation(chair_->com)));
+    if (chair_->dynamic && chair_state) {
+      rb->setLinearVelocity(Bt(chair_state->lin_vel));
+      rb->setAngularVelocity(Bt(chair_state->ang_vel));
+    }
+    rb->setActivationState(DISABLE_DEACTIVATION);
+    rb->setUserIndex(kChair);
+    sc.chair = rb;
+    sc.objects.emplace_back(rb);
+    sc.world.addRigidBody(rb);
+  }
+
+  // Humanoid: link order = bodies in file order, each body's hinges in application order.
+  const int nb = model_.num_bodies();
+  sc.joint_link.assign(model_.num_joints(), -1);
+  sc.body_link.assign(nb, -1);
+  sc.inertial_inv.resize(nb);
+  const Body& root = model_.body(0);
+  sc.body = std::make_unique<btMultiBody>(model_.num_joints(), root.mass, Bt(root.principal_inertia),
+                                          /*fixedBase=*/false, /*canSleep=*/false);
+  btMultiBody* mb = sc.body.get();
+  // Link frames at q = 0 with the root at the origin; only relative frames matter here.
+  const std::vector<double> zeros(model_.num_joints(), 0.0);
+  const FkResult fk0 = ForwardKinematics(model_, Eigen::Vector3d::Zero(),
+                                         Eigen::Quaterniond::Identity(), zeros.data());
+  std::vector<Eigen::Isometry3d> link_frame(model_.num_joints());  // by link index
+  std::vector<Eigen::Isometry3d> body_frame(nb);                   // body's carrying link frame
+  body_frame[0] = fk0.body_world[0] * InertialFrame(root);
+  sc.inertial_inv[0] = InertialFrame(root).inverse();
+  int link = 0;
+  for (int bi = 1; bi < nb; ++bi) {
+    const Body& b = model_.body(bi);
+    const Eigen::Isometry3d& bw = fk0.body_world[bi];
+    int parent_link = sc.body_link[b.parent];
+    Eigen::Isometry3d parent_frame = body_frame[b.parent];
+    for (size_t k = 0; k < b.joints.size(); ++k) {
+      const Joint& jt = model_.joint(b.joints[k]);
+      const bool carrier = k + 1 == b.joints.size();
+      const Eigen::Isometry3d frame = carrier ? bw * InertialFrame(b) : bw * Translation(jt.anchor);
+      const Eigen::Vector3d pivot = bw * jt.anchor;
+      const Eigen::Vector3d parent_to_pivot = parent_frame.inverse() * pivot;
+      const Eigen::Vector3d pivot_to_com = -(frame.inverse() * pivot);
+      const Eigen::Quaterniond rot_parent_to_this(frame.rotation().transpose() *
+                                                  parent_frame.rotation());
+      const Eigen::Vector3d axis = frame.rotation().transpose() * (bw.rotation() * jt.axis);
+      const double hm = model_.helper_link_mass();
+      const double mass = carrier ? b.mass : hm;
+      const Eigen::Vector3d inertia =
+          carrier ? b.principal_inertia
+                  : Eigen::Vector3d::Constant(0.4 * hm * kHelperInertiaRadius * kHelperInertiaRadius);
+      mb->setupRevolute(link, mass, Bt(inertia), parent_link, Bt(rot_parent_to_this.normalized()),
+                        Bt(axis), Bt(parent_to_pivot), Bt(pivot_to_com), true);
+      mb->getLink(link).m_flags |= BT_MULTIBODYLINKFLAGS_DISABLE_ALL_PARENT_COLLISION;
+      sc.joint_link[b.joints[k]] = link;
+      link_frame[link] = frame;
+      parent_link = link;
+      parent_frame = frame;
+      ++link;
+    }
+    sc.body_link[bi] = parent_link;
+    body_frame[bi] = parent_frame;
+    sc.inertial_inv[bi] = InertialFrame(b).inverse();
+  }
+  mb->finalizeMultiDof();
+  mb->setHasSelfCollision(true);
+  mb->setLinearDamping(config_.linear_damping);
+  mb->setAngularDamping(config_.angular_damping);
+  mb->setCanSleep(false);
+
+  // Pose and velocities. Bullet's base is the torso's inertial frame.
+  const Eigen::Isometry3d root_pose = Translation(hs.root_pos) * Eigen::Isometry3d(hs.root_quat.normalized());
+  const Eigen::Isometry3d base = root_pose * InertialFrame(root);
+  mb->setBaseWorldTransform(Bt(base));
+  const Eigen::Vector3d com_offset = base.translation() - hs.root_pos;
+  mb->setBaseVel(Bt(hs.root_lin_vel + hs.root_ang_vel.cross(com_offset)));
+  mb->setBaseOmega(Bt(hs.root_ang_vel));
+  for (int j = 0; j < model_.num_joints(); ++j) {
+    mb->setJointPos(sc.joint_link[j], hs.q[j]);
+    mb->setJointVel(sc.joint_link[j], hs.qd[j]);
+  }
+  sc.world.addMultiBody(mb);
+
+  // Colliders: base and carrier links get the body's geoms; a lone capsule centred at the com
+  // (lwaist, pelvis, thighs, shins, upper arms) is used directly, since compound shapes cost a
+  // compound-compound collision algorithm per pair.
+  for (int bi = 0; bi < nb; ++bi) {
+    const Body& b = model_.body(bi);
+    btCollisionShape* body_shape = nullptr;
+    if (b.geoms.size() == 1 && b.geoms[0].type == Geom::Type::kCapsule) {
+      const Geom& g = b.geoms[0];
+      const Eigen::Vector3d seg = g.to - g.from;
+      const Eigen::Vector3d centre = sc.inertial_inv[bi] * (0.5 * (g.from + g.to));
+      const Eigen::Vector3d dir = sc.inertial_inv[bi].rotation() * seg.normalized();
+      int axis = -1;
+      for (int k = 0; k < 3; ++k) {
+        if (std::abs(std::abs(dir[k]) - 1.0) < 1e-9) axis = k;
+      }
+      if (axis >= 0 && centre.norm() < 1e-9) {
+        const double h = seg.norm();
+        body_shape = axis == 0   ? static_cast<btCollisionShape*>(new btCapsuleShapeX(g.radius, h))
+                     : axis == 1 ? static_cast<btCollisionShape*>(new btCapsuleShape(g.radius, h))
+                                 : static_cast<btCollisionShape*>(new btCapsuleShapeZ(g.radius, h));
+        sc.Keep(body_shape);
+      }
+    }
+    if (!body_shape) {
+      auto* compound = new btCompoundShape();
+      sc.Keep(compound);
+      for (const Geom& g : b.geoms) {
+        Eigen::Isometry3d gt = Translation(0.5 * (g.from + g.to));
+        btCollisionShape* shape;
+        if (g.type == Geom::Type::kCapsule) {
+          const Eigen::Vector3d seg = g.to - g.from;
+          gt.rotate(RotationZTo(seg.normalized()));
+          shape = sc.Keep(new btCapsuleShapeZ(g.radius, seg.norm()));
+        } else {
+          shape = sc.Keep(new btSphereShape(g.radius));
+        }
+        compound->addChildShape(Bt(sc.inertial_inv[bi] * gt), shape);
+      }
+      body_shape = compound;
+    }
+    const int l = sc.body_link[bi];
+    auto* col = new btMultiBodyLinkCollider(mb, l);
+    col->setCollisionShape(body_shape);
+    col->setFriction(config_.humanoid_friction);
+    col->setUserIndex(kHumanoid);
+    col->setUserIndex2(bi);
+    sc.objects.emplace_back(col);
+    sc.world.addCollisionObject(col, btBroadphaseProxy::DefaultFilter, btBroadphaseProxy::AllFilter);
+    if (l < 0) {
+      mb->setBaseCollider(col);
+    } else {
+      mb->getLink(l).m_collider = col;
+    }
+  }
+
+  sc.limit_active.assign(model_.num_joints(), 0);
+  for (int j = 0; j < model_.num_joints(); ++j) {
+    const Joint& jt = model_.joint(j);
+    sc.constraints.emplace_back(
+        new btMultiBodyJointLimitConstraint(mb, sc.joint_link[j], jt.lower, jt.upper));
+  }
+  UpdateJointLimits();
+
+  mb->forwardKinematics(sc.scratch_q, sc.scratch_m);
+  mb->updateCollisionObjectWorldTransforms(sc.scratch_q, sc.scratch_m);
+  // Contacts are known right after a reset, before the first step.
+  sc.world.performDiscreteCollisionDetection();
+}
+
+WorldState World::GetState() const {
+  const Scene& sc = *scene_;
+  const btMultiBody* mb = sc.body.get();
+  WorldState s;
+  HumanoidState& h = s.humanoid;
+  const Eigen::Isometry3d base = Ei(mb->getBaseWorldTransform());
+  const Eigen::Isometry3d root = base * sc.inertial_inv[0];
+  h.root_pos = root.translation();
+  h.root_quat = Eigen::Quaterniond(root.rotation()).normalized();
+  h.root_ang_vel = Ei(mb->getBaseOmega());
+  h.root_lin_vel = Ei(mb->getBaseVel()) + h.root_ang_vel.cross(h.root_pos - base.translation());
+  ReadJoints(h.q.data(), h.qd.data());
+  if (sc.chair) {
+    const Eigen::Isometry3d com = Ei(sc.chair->getWorldTransform());
+    s.chair.pos = (com * Translation(-chair_->com)).translation();
+    s.chair.quat = Eigen::Quaterniond(com.rotation()).normalized();
+    s.chair.lin_vel = Ei(sc.chair->getLinearVelocity());
+    s.chair.ang_vel = Ei(sc.chair->getAngularVelocity());
+  }
+  return s;
+}
+
+void World::SetJointTorques(const double* tau) {
+  for (int j = 0; j < model_.num_joints(); ++j) tau_[j] = tau[j];
+}
+
+void World::UpdateJointLimits() {
+  // A limit constraint costs a full articulated-body solve per row even when slack, so only
+  // joints that can reach a limit within this step carry one (the rows of a slack limit apply no
+  // impulse, so leaving it out changes nothing).
+  Scene& sc = *scene_;
+  const btMultiBody* mb = sc.body.get();
+  for (int j = 0; j < model_.num_joints(); ++j) {
+    const Joint& jt = model_.joint(j);
+    const int l = sc.joint_link[j];
+    const double q = mb->getJointPos(l);
+    const double reach = config_.limit_margin + 2.0 * std::abs(mb->getJointVel(l)) * config_.physics_dt;
+    const bool near = q < jt.lower + reach || q > jt.upper - reach;
+    if (near != static_cast<bool>(sc.limit_active[j])) {
+      if (near) {
+        sc.world.addMultiBodyConstraint(sc.constraints[j].get());
+      } else {
+        sc.world.removeMultiBodyConstraint(sc.constraints[j].get());
+      }
+      sc.limit_active[j] = near;
+    }
+  }
+}
+
+void World::StepPhysics() {
+  Scene& sc = *scene_;
+  btMultiBody* mb = sc.body.get();
+  UpdateJointLimits();
+  for (int j = 0; j < model_.num_joints(); ++j) mb->addJointTorque(sc.joint_link[j], tau_[j]);
+  // maxSubSteps = 0: exactly one step of physics_dt (Bullet clears the torques afterwards).
+  sc.world.stepSimulation(config_.physics_dt, 0, config_.physics_dt);
+}
+
+void World::RawControlStepsPd(int n, const PdController& pd, const float* action) {
+  Scene& sc = *scene_;
+  btMultiBody* mb = sc.body.get();
+  double q[HumanoidModel::kNumJoints], qd[HumanoidModel::kNumJoints], tau[HumanoidModel::kNumJoints];
+  for (int i = 0; i < n; ++i) {
+    for (int s = 0; s < config_.substeps; ++s) {
+      UpdateJointLimits();
+      ReadJoints(q, qd);
+      pd.Torques(action, q, qd, tau);
+      for (int j = 0; j < model_.num_joints(); ++j) mb->addJointTorque(sc.joint_link[j], tau[j]);
+      sc.world.stepSimulation(config_.physics_dt, 0, config_.physics_dt);
+    }
+  }
+}
+
+void World::ReadJoints(double* q, double* qd) const {
+  const btMultiBody* mb = scene_->body.get();
+  for (int j = 0; j < model_.num_joints(); ++j) {
+    q[j] = mb->getJointPos(scene_->joint_link[j]);
+    qd[j] = mb->getJointVel(scene_->joint_link[j]);
+  }
+}
+
+Eigen::Isometry3d World::BodyPose(int body) const {
+  const Scene& sc = *scene_;
+  const int l = sc.body_link[body];
+  const btCollisionObject* col =
+      l < 0 ? sc.body->getBaseCollider() : sc.body->getLink(l).m_collider;
+  return Ei(col->getWorldTransform()) * sc.inertial_inv[body];
+}
+
+Eigen::Vector3d World::CenterOfMass() const {
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  double mass = 0.0;
+  for (int b = 0; b < model_.num_bodies(); ++b) {
+    const Body& body = model_.body(b);
+    sum += body.mass * (BodyPose(b) * body.com);
+    mass += body.mass;
+  }
+  return sum / mass;
+}
+
+Contacts World::ReadContacts() const {
+  Contacts c;
+  btCollisionDispatcher& d = scene_->dispatcher;
+  const int pelvis = model_.pelvis_body();
+  const int n = d.getNumManifolds();
+  for (int i = 0; i < n; ++i) {
+    const btPersistentManifold* m = d.getManifoldByIndexInternal(i);
+    bool touching = false;
+    for (int p = 0; p < m->getNumContacts() && !touching; ++p) {
+      touching = m->getContactPoint(p).getDistance() < config_.contact_distance;
+    }
+    if (!touching) continue;
+    const btCollisionObject* a = m->getBody0();
+    const btCollisionObject* b = m->getBody1();
+    if (a->getUserIndex() != kHumanoid) std::swap(a, b);
+    if (a->getUserIndex() != kHumanoid || b->getUserIndex() == kHumanoid) continue;
+    const int body = a->getUserIndex2();
+    if (b->getUserIndex() == kFloor) {
+      for (int f = 0; f < 2; ++f) c.foot_floor[f] = c.foot_floor[f] || body == model_.foot_bodies()[f];
+    } else if (b->getUserIndex() == kChair) {
+      c.humanoid_chair = true;
+      c.pelvis_chair = c.pelvis_chair || body == pelvis;
+    }
+  }
+  return c;
+}
+
+int World::NumContactPoints(int* self_points) const {
+  btCollisionDispatcher& d = scene_->dispatcher;
+  int total = 0, self = 0;
+  for (int i = 0; i < d.getNumManifolds(); ++i) {
+    const btPersistentManifold* m = d.getManifoldByIndexInternal(i);
+    total += m->getNumContacts();
+    if (m->getBody0()->getUserIndex() == kHumanoid && m->getBody1()->getUserIndex() == kHumanoid) {
+      self += m->getNumContacts();
+    }
+  }
+  if (self_points) *self_points = self;
+  return total;
+}
+
+Eigen::Vector3d World::SeatTargetWorld() const {
+  return chair_ ? Eigen::Vector3d(placement_.Transform() * chair_->seat_target)
+                : Eigen::Vector3d(placement_.Transform() * Eigen::Vector3d::Zero());
+}
+
+}  // namespace perch

@@ -1,0 +1,136 @@
+// The mutable Bullet world: floor, the humanoid as a btMultiBody (Featherstone) and an optional
+// chair. The header is Bullet-free (pimpl) so that tests and the app never include Bullet.
+//
+// The humanoid: one revolute link per joint. A body with several hinges (abdomen, hips, ankles,
+// shoulders) gets low-mass helper links for all but its last hinge, as Bullet's MJCF importer
+// does; the last hinge's link carries the body's mass, inertia (principal frame at the com) and
+// collision shapes. Self-collision is on except between a link and its ancestors; joint limits
+// are btMultiBodyJointLimitConstraints. Actuation is explicit joint torque only.
+#pragma once
+
+#include <array>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "common/json_util.h"
+#include "envs/chair.h"
+#include "envs/humanoid_model.h"
+
+namespace perch {
+
+class PdController;
+
+struct PhysicsConfig {
+  // Authors' timing (notes 1.1): 0.0165 / 4 s, i.e. 242.4 Hz physics, 60.6 Hz control; the paper
+  // rounds these to 240 / 60 Hz. The mocap references are sampled at 0.0165 s (docs/env.md).
+  double physics_dt = 0.0165 / 4;  // [s]
+  int substeps = 4;                // physics steps per control step
+  double gravity = 9.8;            // [m/s^2], along -z
+  int solver_iterations = 5;       // PGS iterations (authors: 5; docs/env.md)
+  double contact_erp = 0.9;        // Bullet erp2 for contacts (authors: 0.9)
+  double floor_friction = 0.8;     // lateral; Bullet multiplies the two bodies' frictions
+  double humanoid_friction = 0.5;  // Bullet's MJCF importer default
+  double chair_friction = 0.5;     // Bullet's URDF default
+  double linear_damping = 0.04;    // btMultiBody defaults, as in the authors' sim [1/s]
+  double angular_damping = 0.04;
+  // A manifold point counts as contact when its signed distance is below this [m].
+  double contact_distance = 0.02;
+  // A joint's limit constraint is active only within limit_margin + 2 |qdot| dt of a limit [rad].
+  double limit_margin = 0.05;
+
+  static PhysicsConfig FromJson(const Json& j, const std::string& ctx);
+  Json ToJson() const;
+};
+
+// Where the chair stands: rotation about the vertical axis, then translation.
+struct ChairPlacement {
+  double x = 0.0, y = 0.0;  // [m]
+  double yaw = 0.0;         // [rad]
+  Eigen::Isometry3d Transform() const;
+};
+
+struct HumanoidState {
+  Eigen::Vector3d root_pos = Eigen::Vector3d::Zero();  // torso body origin, world [m]
+  Eigen::Quaterniond root_quat = Eigen::Quaterniond::Identity();  // torso frame -> world
+  Eigen::Vector3d root_lin_vel = Eigen::Vector3d::Zero();  // of the torso origin, world [m/s]
+  Eigen::Vector3d root_ang_vel = Eigen::Vector3d::Zero();  // world [rad/s]
+  std::array<double, HumanoidModel::kNumJoints> q{};   // observation order [rad]
+  std::array<double, HumanoidModel::kNumJoints> qd{};  // observation order [rad/s]
+};
+
+struct ChairState {
+  Eigen::Vector3d pos = Eigen::Vector3d::Zero();  // chair frame origin, world [m]
+  Eigen::Quaterniond quat = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d lin_vel = Eigen::Vector3d::Zero();  // of the chair's com, world [m/s]
+  Eigen::Vector3d ang_vel = Eigen::Vector3d::Zero();  // world [rad/s]
+};
+
+struct WorldState {
+  HumanoidState humanoid;
+  ChairState chair;  // ignored without a chair
+};
+
+struct Contacts {
+  bool foot_floor[2] = {false, false};  // [right, left] foot touches the floor
+  bool pelvis_chair = false;            // pelvis touches any chair box
+  bool humanoid_chair = false;          // any humanoid body touches the chair
+};
+
+// The authors' 51-column qpos row (notes 7.2) <-> humanoid state. Root angular velocity is not in
+// the row: it is set to zero, as the authors' reset does (notes 1.6).
+HumanoidState StateFromQpos(const double* qpos51);
+void QposFromState(const HumanoidState& s, double* qpos51);
+
+class World {
+ public:
+  // `model` and `chair` must outlive the world; chair may be null (no chair).
+  World(const HumanoidModel& model, const Chair* chair, const ChairPlacement& placement,
+        const PhysicsConfig& config);
+  ~World();
+  World(const World&) = delete;
+  World& operator=(const World&) = delete;
+
+  // Wipes the Bullet world, rebuilds it and writes the state (the chair at rest at its placement
+  // when `chair_state` is null). Deterministic: the same state gives the same future.
+  void SetState(const HumanoidState& humanoid, const ChairState* chair_state = nullptr);
+  void SetState(const WorldState& s) { SetState(s.humanoid, &s.chair); }
+  WorldState GetState() const;
+
+  // Torques [N m] per joint in observation order, applied at every following physics step.
+  void SetJointTorques(const double* tau);
+  void StepPhysics();
+
+  void ReadJoints(double* q, double* qd) const;  // [num_joints] each, observation order
+  Eigen::Isometry3d BodyPose(int body) const;    // world pose of a body frame
+  // Centre of mass of the humanoid's bodies, world [m].
+  Eigen::Vector3d CenterOfMass() const;
+  // Scans the contact manifolds of the last collision detection.
+  Contacts ReadContacts() const;
+  // Contact points in all manifolds, and how many of them are between two humanoid bodies.
+  int NumContactPoints(int* self_points = nullptr) const;
+  bool has_chair() const { return chair_ != nullptr; }
+  Eigen::Isometry3d ChairPlacementTransform() const { return placement_.Transform(); }
+  // The seat target (seat surface centre) at the chair's placement, world [m].
+  Eigen::Vector3d SeatTargetWorld() const;
+
+  const HumanoidModel& model() const { return model_; }
+  const PhysicsConfig& config() const { return config_; }
+
+  // Baseline for `perch bench env`: n control steps of a bare Bullet loop that, at every physics
+  // step, reads the joints, applies `pd`'s torques for the fixed `action` and steps.
+  void RawControlStepsPd(int n, const PdController& pd, const float* action);
+
+ private:
+  struct Scene;
+  void UpdateJointLimits();
+  const HumanoidModel& model_;
+  const Chair* chair_;
+  ChairPlacement placement_;
+  PhysicsConfig config_;
+  std::unique_ptr<Scene> scene_;
+  std::array<double, HumanoidModel::kNumJoints> tau_{};
+};
+
+}  // namespace perch

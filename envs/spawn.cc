@@ -1,0 +1,44 @@
+#include "envs/spawn.h"
+
+#include <cmath>
+
+namespace perch {
+
+SpawnPose SampleSpawn(const SpawnConfig& c, Rng& rng) {
+  SpawnPose s;
+  if (c.zone == 0) {
+    s.x = c.x;
+    s.y = c.y;
+    s.yaw_added = c.yaw_deg * M_PI / 180.0;
+    return s;
+  }
+  const std::array<double, 2>& r = c.zone == 1 ? c.zone1_deg : c.zone == 2 ? c.zone2_deg : c.zone3_deg;
+  const double magnitude = rng.Uniform(r[0], r[1]) * M_PI / 180.0;
+  const double sign = rng.Uniform() < 0.5 ? -1.0 : 1.0;
+  s.theta = sign * magnitude;
+  s.x = c.center_x + c.radius * std::cos(s.theta);
+  s.y = c.center_y + c.radius * std::sin(s.theta);
+  s.yaw_added = s.theta + M_PI;  // facing the centre
+  return s;
+}
+
+HumanoidState TransformHorizontally(const HumanoidState& s, double yaw, double dx, double dy) {
+  const Eigen::AngleAxisd rz(yaw, Eigen::Vector3d::UnitZ());
+  HumanoidState o = s;
+  o.root_pos = rz * s.root_pos + Eigen::Vector3d(dx, dy, 0.0);
+  o.root_quat = (Eigen::Quaterniond(rz) * s.root_quat).normalized();
+  o.root_lin_vel = rz * s.root_lin_vel;
+  o.root_ang_vel = rz * s.root_ang_vel;
+  return o;
+}
+
+HumanoidState PlaceAtSpawn(const HumanoidState& pose, const SpawnPose& spawn,
+                           const ChairPlacement& placement) {
+  HumanoidState local = pose;
+  local.root_pos.x() = 0.0;
+  local.root_pos.y() = 0.0;
+  local = TransformHorizontally(local, spawn.yaw_added, spawn.x, spawn.y);
+  return TransformHorizontally(local, placement.yaw, placement.x, placement.y);
+}
+
+}  // namespace perch

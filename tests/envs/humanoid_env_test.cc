@@ -1,0 +1,493 @@
+#include "envs/humanoid_env.h"
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <sys/stat.h>
+
+#include <gtest/gtest.h>
+
+#include "common/npz.h"
+#include "common/rng.h"
+#include "envs/spawn.h"
+
+namespace perch {
+namespace {
+
+constexpr int kFeet = 48;   // offset of the foot-contact slice
+constexpr int kJoints = 6;  // offset of the joints slice
+
+EnvConfig PdConfig() {
+  EnvConfig c;
+  c.action_mode = ActionMode::kPd;
+  return c;
+}
+
+std::string SharedDir() { return std::string(PERCH_SOURCE_DIR) + "/../shared"; }
+bool Exists(const std::string& p) {
+  struct stat st;
+  return ::stat(p.c_str(), &st) == 0;
+}
+
+TEST(HumanoidEnv, SpecLayouts) {
+  EnvConfig c;
+  HumanoidChairEnv goal_env(c);
+  EXPECT_EQ(goal_env.spec().obs_dim, 52);
+  EXPECT_EQ(goal_env.spec().act_dim, 21);
+  ASSERT_EQ(goal_env.spec().obs_slices.size(), 4u);
+  EXPECT_EQ(goal_env.spec().obs_slices[3].name, "goal");
+  EXPECT_NEAR(goal_env.spec().control_dt, 0.0165, 1e-12);
+  c.obs_layout = ObsLayout::kProprioChair;
+  HumanoidChairEnv chair_env(c);
+  EXPECT_EQ(chair_env.spec().obs_dim, 57);
+  EXPECT_EQ(chair_env.spec().obs_slices[3].name, "chair");
+  EXPECT_EQ(chair_env.spec().obs_slices[3].offset, 50);
+  EXPECT_EQ(chair_env.spec().obs_slices[3].size, 7);
+  EXPECT_EQ(chair_env.spec().obs_low[0], -5.0f);
+}
+
+TEST(HumanoidEnv, StandingPoseHeldByPdFor10Seconds) {
+  HumanoidChairEnv env(PdConfig());
+  std::vector<float> obs(env.spec().obs_dim), act(21);
+  HumanoidState s = StandingPose(env.model(), 0.002);
+  s.root_pos.x() = 2.0;  // away from the chair
+  env.ResetToState(s, obs.data());
+  env.HoldPoseAction(s.q.data(), act.data());
+  const int steps = static_cast<int>(std::ceil(10.0 / env.spec().control_dt));
+  double max_speed_last_second = 0.0;
+  for (int t = 0; t < steps; ++t) {
+    const StepResult r = env.Step(act.data(), obs.data());
+    ASSERT_FALSE(r.terminated) << "fell at step " << t;
+    ASSERT_FALSE(r.invalid);
+    if (t > steps - 61) {
+      max_speed_last_second = std::max(max_speed_last_second, env.humanoid_state().root_lin_vel.norm());
+    }
+  }
+  EXPECT_GT(env.humanoid_state().root_pos.z(), 1.2);
+  EXPECT_LT(std::abs(env.RootRpy().x()) + std::abs(env.RootRpy().y()), 0.15);
+  // At rest: no jitter, no drift.
+  EXPECT_LT(max_speed_last_second, 0.1);
+  EXPECT_LT((env.humanoid_state().root_pos.head<2>() - s.root_pos.head<2>()).norm(), 0.1);
+  EXPECT_TRUE(env.contacts().foot_floor[0]);
+  EXPECT_TRUE(env.contacts().foot_floor[1]);
+}
+
+// pd mode: action a (action order, ankles swapped) -> target mid + a (hi - lo) / 2 per joint.
+TEST(HumanoidEnv, PdModeDrivesEachJointToItsTarget) {
+  EnvConfig c = PdConfig();
+  c.physics.gravity = 0.0;
+  HumanoidChairEnv env(c);
+  std::vector<float> obs(env.spec().obs_dim), act(21);
+  HumanoidState s = StandingPose(env.model(), 2.0);
+  env.ResetToState(s, obs.data());
+  Rng rng(8);
+  std::array<double, 21> target{};
+  for (int j = 0; j < 21; ++j) {
+    const Joint& jt = env.model().joint(j);
+    target[j] = jt.lower + rng.Uniform(0.3, 0.7) * (jt.upper - jt.lower);
+  }
+  env.HoldPoseAction(target.data(), act.data());
+  const int ankle_x = env.model().FindJoint("right_ankle_x");
+  EXPECT_FLOAT_EQ(act[env.model().joint(ankle_x).action_index], act[7]);  // action 7 = ankle x
+  for (int t = 0; t < 120; ++t) env.Step(act.data(), obs.data());
+  for (int j = 0; j < 21; ++j) {
+    EXPECT_NEAR(env.humanoid_state().q[j], target[j], 0.03) << env.model().joint(j).name;
+    EXPECT_NEAR(obs[kJoints + 2 * j], env.model().joint(j).Normalize(target[j]), 0.05);
+  }
+}
+
+TEST(HumanoidEnv, DroppedOnSeatRegistersPelvisSeatContact) {
+  HumanoidChairEnv env(PdConfig());
+  std::vector<float> obs(env.spec().obs_dim), act(21);
+  const Chair chair = Chair::Load(Chair::PresetPath("authors"));
+  const HumanoidState s = SeatedPose(env.model(), chair, ChairPlacement{}, 0.05);
+  env.ResetToState(s, obs.data());
+  EXPECT_FALSE(env.PelvisSeatContact());  // 5 cm above the seat
+  EXPECT_FALSE(env.contacts().humanoid_chair);
+  env.HoldPoseAction(s.q.data(), act.data());
+  for (int t = 0; t < 60; ++t) ASSERT_FALSE(env.Step(act.data(), obs.data()).terminated);
+  EXPECT_TRUE(env.contacts().pelvis_chair);
+  EXPECT_TRUE(env.PelvisSeatContact());
+  EXPECT_LT(env.PelvisPosition().z(), 0.54);
+  EXPECT_LT(env.PelvisSeatDistance(), 0.3);
+}
+
+TEST(HumanoidEnv, FootContactFlagsStandingAndLifted) {
+  EnvConfig c = PdConfig();
+  c.obs.foot_contact_lag = true;
+  HumanoidChairEnv env(c);
+  std::vector<float> obs(env.spec().obs_dim), act(21);
+  HumanoidState s = StandingPose(env.model(), 0.0);
+  s.root_pos.x() = 2.0;
+  env.ResetToState(s, obs.data());
+  EXPECT_TRUE(env.contacts().foot_floor[0]);
+  EXPECT_TRUE(env.contacts().foot_floor[1]);
+  // Authors: the flags lag one step, zeros right after reset.
+  EXPECT_EQ(obs[kFeet], 0.0f);
+  EXPECT_EQ(obs[kFeet + 1], 0.0f);
+  env.HoldPoseAction(s.q.data(), act.data());
+  env.Step(act.data(), obs.data());
+  EXPECT_EQ(obs[kFeet], 1.0f);
+  EXPECT_EQ(obs[kFeet + 1], 1.0f);
+
+  // Right foot lifted (hip and knee flexed), standing on the left.
+  HumanoidState lifted = s;
+  lifted.q[env.model().FindJoint("right_hip_y")] = -0.6;
+  lifted.q[env.model().FindJoint("right_knee")] = -1.2;
+  env.ResetToState(lifted, obs.data());
+  EXPECT_FALSE(env.contacts().foot_floor[0]);
+  EXPECT_TRUE(env.contacts().foot_floor[1]);
+  EXPECT_GT(env.BodyPosition(env.model().foot_bodies()[0]).z(), 0.1);
+  env.HoldPoseAction(lifted.q.data(), act.data());
+  env.Step(act.data(), obs.data());
+  EXPECT_EQ(obs[kFeet], 0.0f);
+  EXPECT_EQ(obs[kFeet + 1], 1.0f);
+
+  // Without the lag the flags are current at reset.
+  c.obs.foot_contact_lag = false;
+  HumanoidChairEnv now(c);
+  now.ResetToState(lifted, obs.data());
+  EXPECT_EQ(obs[kFeet], 0.0f);
+  EXPECT_EQ(obs[kFeet + 1], 1.0f);
+}
+
+// The observation is defined relative to the humanoid's heading and the chair: the same scene
+// rotated about the vertical axis and shifted gives the same observation.
+TEST(HumanoidEnv, ObservationInvariantToHorizontalSceneTransform) {
+  const double yaw = 1.1, dx = 3.0, dy = -2.0;
+  for (ObsLayout layout : {ObsLayout::kProprioGoal, ObsLayout::kProprioChair}) {
+    EnvConfig a = PdConfig();
+    a.obs_layout = layout;
+    a.obs.foot_contact_lag = false;
+    a.stand.walk_target = {2.0, 1.0};
+    EnvConfig b = a;
+    b.chair_placement = ChairPlacement{dx, dy, yaw};
+    const Eigen::Vector3d t = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * Eigen::Vector3d(2.0, 1.0, 0.0);
+    b.stand.walk_target = {t.x() + dx, t.y() + dy};
+    HumanoidChairEnv ea(a), eb(b);
+    std::vector<float> oa(ea.spec().obs_dim), ob(eb.spec().obs_dim), act(21);
+    HumanoidState s = StandingPose(ea.model(), 0.01);
+    s.root_pos = Eigen::Vector3d(1.2, 0.4, s.root_pos.z());
+    s.root_quat = QuatFromRpy(0.05, 0.1, 2.5);
+    s.root_lin_vel = Eigen::Vector3d(0.5, -0.3, 0.1);
+    s.root_ang_vel = Eigen::Vector3d(0.1, 0.2, -0.3);
+    s.q[ea.model().FindJoint("right_knee")] = -0.7;
+    ea.ResetToState(s, oa.data());
+    eb.ResetToState(TransformHorizontally(s, yaw, dx, dy), ob.data());
+    for (size_t i = 0; i < oa.size(); ++i) EXPECT_NEAR(oa[i], ob[i], 1e-4) << "reset, index " << i;
+    ea.HoldPoseAction(s.q.data(), act.data());
+    for (int step = 0; step < 10; ++step) {
+      ea.Step(act.data(), oa.data());
+      eb.Step(act.data(), ob.data());
+    }
+    // Single-precision Bullet rounds the two runs differently and contact resolution amplifies
+    // that: after 10 steps (feet landing) the observations agree to a few thousandths.
+    for (size_t i = 0; i < oa.size(); ++i) EXPECT_NEAR(oa[i], ob[i], 0.02) << "step 10, index " << i;
+    // In the air (no contacts) the agreement stays at rounding level.
+    HumanoidState air = s;
+    air.root_pos.z() += 1.0;
+    ea.ResetToState(air, oa.data());
+    eb.ResetToState(TransformHorizontally(air, yaw, dx, dy), ob.data());
+    for (int step = 0; step < 10; ++step) {
+      ea.Step(act.data(), oa.data());
+      eb.Step(act.data(), ob.data());
+    }
+    for (size_t i = 0; i < oa.size(); ++i) EXPECT_NEAR(oa[i], ob[i], 1e-3) << "air, index " << i;
+  }
+}
+
+// Random actions from a seeded stream.
+std::vector<std::vector<float>> Trajectory(uint64_t seed, int steps, EnvConfig c) {
+  c.spawn.zone = 1;
+  HumanoidChairEnv env(c);
+  env.Seed(seed);
+  Rng act_rng(99);
+  std::vector<float> obs(env.spec().obs_dim), act(21);
+  std::vector<std::vector<float>> out;
+  env.Reset(obs.data());
+  out.push_back(obs);
+  for (int t = 0; t < steps; ++t) {
+    for (float& a : act) a = static_cast<float>(act_rng.Uniform(-1, 1));
+    const StepResult r = env.Step(act.data(), obs.data());
+    out.push_back(obs);
+    if (r.terminated || r.truncated) env.Reset(obs.data());
+  }
+  return out;
+}
+
+TEST(HumanoidEnv, DeterministicForSeedAndActions) {
+  for (ActionMode mode : {ActionMode::kTorque, ActionMode::kPd}) {
+    EnvConfig c;
+    c.action_mode = mode;
+    const auto a = Trajectory(5, 80, c);
+    const auto b = Trajectory(5, 80, c);
+    const auto other = Trajectory(6, 80, c);
+    ASSERT_EQ(a.size(), b.size());
+    for (size_t t = 0; t < a.size(); ++t) {
+      ASSERT_EQ(0, std::memcmp(a[t].data(), b[t].data(), a[t].size() * sizeof(float))) << "step " << t;
+    }
+    EXPECT_NE(0, std::memcmp(a[0].data(), other[0].data(), a[0].size() * sizeof(float)));
+  }
+}
+
+// Runs n steps of a PD hold of the seated pose plus a seeded perturbation, recording obs.
+std::vector<std::vector<float>> RunSteps(HumanoidChairEnv& env, Rng& rng, int n) {
+  std::vector<float> obs(env.spec().obs_dim), act(21);
+  env.HoldPoseAction(env.humanoid_state().q.data(), act.data());
+  std::vector<std::vector<float>> out;
+  for (int t = 0; t < n; ++t) {
+    std::vector<float> a = act;
+    for (float& x : a) x = std::clamp(x + static_cast<float>(rng.Uniform(-0.05, 0.05)), -1.0f, 1.0f);
+    env.Step(a.data(), obs.data());
+    out.push_back(obs);
+  }
+  return out;
+}
+
+TEST(HumanoidEnv, SavedStateContinuesIdentically) {
+  EnvConfig c = PdConfig();
+  c.obs_layout = ObsLayout::kProprioChair;
+  HumanoidChairEnv env(c), other(c);
+  std::vector<float> obs(env.spec().obs_dim);
+  const Chair chair = Chair::Load(Chair::PresetPath("authors"));
+  env.ResetToState(SeatedPose(env.model(), chair, ChairPlacement{}, 0.02), obs.data());
+  Rng rng(1);
+  RunSteps(env, rng, 30);  // settle onto the seat, in contact
+  const EnvState saved = env.GetState();
+  const Rng::State rng_saved = rng.GetState();
+  const auto original = RunSteps(env, rng, 20);
+  EXPECT_EQ(env.GetState().step, 50);
+
+  env.SetState(saved);
+  EXPECT_EQ(env.episode_step(), 30);
+  rng.SetState(rng_saved);
+  const auto restored_same = RunSteps(env, rng, 20);
+  other.SetState(saved);
+  rng.SetState(rng_saved);
+  const auto restored_other = RunSteps(other, rng, 20);
+  for (int t = 0; t < 20; ++t) {
+    // Any restore of a state gives the same future, bit for bit, in any env instance.
+    ASSERT_EQ(0, std::memcmp(restored_same[t].data(), restored_other[t].data(), obs.size() * sizeof(float)))
+        << "step " << t;
+    // Bullet's contact caches (warm-start impulses, manifold points) are not part of the state.
+    // With many redundant seat contacts the solver's impulse split, hence the joint speeds, can
+    // differ after a restore; the pose features (height, roll, pitch, joint angles, chair vector)
+    // must still follow the uninterrupted run closely.
+    std::vector<size_t> pose = {0, 1, 2};
+    for (int j = 0; j < 21; ++j) pose.push_back(kJoints + 2 * j);
+    for (size_t i = 50; i < obs.size(); ++i) pose.push_back(i);
+    for (size_t i : pose) {
+      EXPECT_NEAR(restored_same[t][i], original[t][i], 0.02) << "step " << t << ", index " << i;
+    }
+  }
+}
+
+TEST(HumanoidEnv, SavedStateInTheAirContinuesToRoundingLevel) {
+  HumanoidChairEnv env(PdConfig());
+  std::vector<float> obs(env.spec().obs_dim);
+  HumanoidState s = StandingPose(env.model(), 2.0);
+  s.root_lin_vel = Eigen::Vector3d(1.0, 0.5, 3.0);
+  s.root_ang_vel = Eigen::Vector3d(0.5, -1.0, 2.0);
+  s.qd[3] = 2.0;
+  env.ResetToState(s, obs.data());
+  Rng rng(4);
+  RunSteps(env, rng, 5);
+  const EnvState saved = env.GetState();
+  const Rng::State rng_saved = rng.GetState();
+  const auto original = RunSteps(env, rng, 10);
+  env.SetState(saved);
+  rng.SetState(rng_saved);
+  const auto restored = RunSteps(env, rng, 10);
+  for (int t = 0; t < 10; ++t) {
+    for (size_t i = 0; i < obs.size(); ++i) EXPECT_NEAR(restored[t][i], original[t][i], 1e-4) << t << "," << i;
+  }
+}
+
+TEST(HumanoidEnv, ExplodingStateIsFlaggedInvalidAndEnvRecovers) {
+  HumanoidChairEnv env(EnvConfig{});
+  std::vector<float> obs(env.spec().obs_dim), act(21, 0.0f);
+  HumanoidState s = StandingPose(env.model(), 0.0);
+  s.root_pos.x() = 2.0;
+  s.qd[env.model().FindJoint("right_elbow")] = 500.0;  // far beyond any real motion
+  s.root_lin_vel = Eigen::Vector3d(std::nan(""), 0, 0);
+  env.ResetToState(s, obs.data());
+  const StepResult r = env.Step(act.data(), obs.data());
+  EXPECT_TRUE(r.invalid);
+  EXPECT_TRUE(r.terminated);
+  for (float v : obs) EXPECT_TRUE(std::isfinite(v));
+  env.Reset(obs.data());
+  const StepResult ok = env.Step(act.data(), obs.data());
+  EXPECT_FALSE(ok.invalid);
+}
+
+TEST(HumanoidEnv, StandTaskTerminatesOnFallAndTruncatesAtLimit) {
+  EnvConfig c;  // torque mode, zero torques: the humanoid collapses
+  c.stand.max_episode_steps = 400;
+  HumanoidChairEnv env(c);
+  std::vector<float> obs(env.spec().obs_dim), act(21, 0.0f);
+  env.Reset(obs.data());
+  StepResult r;
+  int t = 0;
+  while (!r.terminated && !r.truncated) {
+    r = env.Step(act.data(), obs.data());
+    ++t;
+  }
+  EXPECT_TRUE(r.terminated);
+  EXPECT_FALSE(r.truncated);
+  EXPECT_LT(env.humanoid_state().root_pos.z(), 0.78);
+  EXPECT_LT(t, 400);
+
+  EnvConfig p = PdConfig();
+  p.stand.max_episode_steps = 30;
+  HumanoidChairEnv held(p);
+  held.Reset(obs.data());
+  held.HoldPoseAction(held.init_pose().q.data(), act.data());
+  for (int i = 0; i < 29; ++i) {
+    r = held.Step(act.data(), obs.data());
+    EXPECT_FALSE(r.truncated || r.terminated);
+    EXPECT_GT(r.reward, 1.5f);  // alive + upright
+  }
+  r = held.Step(act.data(), obs.data());
+  EXPECT_TRUE(r.truncated);
+  EXPECT_FALSE(r.terminated);
+}
+
+TEST(Spawn, ZonesFollowTheirGeometry) {
+  SpawnConfig c;
+  Rng rng(11);
+  const std::array<std::array<double, 2>, 3> zones = {c.zone1_deg, c.zone2_deg, c.zone3_deg};
+  for (int zone = 1; zone <= 3; ++zone) {
+    c.zone = zone;
+    int negative = 0;
+    for (int i = 0; i < 300; ++i) {
+      const SpawnPose p = SampleSpawn(c, rng);
+      const double deg = std::abs(p.theta) * 180.0 / M_PI;
+      EXPECT_GE(deg, zones[zone - 1][0]);
+      EXPECT_LE(deg, zones[zone - 1][1]);
+      negative += p.theta < 0;
+      const Eigen::Vector2d to_center(c.center_x - p.x, c.center_y - p.y);
+      EXPECT_NEAR(to_center.norm(), c.radius, 1e-9);
+      // A pose with yaw 0 spawned this way faces the centre.
+      const HumanoidState h = PlaceAtSpawn(HumanoidState{}, p, ChairPlacement{});
+      const Eigen::Vector3d heading = h.root_quat * Eigen::Vector3d::UnitX();
+      EXPECT_NEAR(heading.head<2>().dot(to_center.normalized()), 1.0, 1e-9);
+    }
+    EXPECT_GT(negative, 100);  // both sides
+    EXPECT_LT(negative, 200);
+  }
+}
+
+TEST(HumanoidEnv, MalformedChairAndConfigNameFileAndField) {
+  const std::string bad_chair = ::testing::TempDir() + "bad_chair.json";
+  std::ofstream(bad_chair) << R"({"name": "x", "boxes": [{"role": "seat", "min": [0, 0, 0], "max": [1, 1]}]})";
+  try {
+    Chair::Load(bad_chair);
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find(bad_chair + ".boxes[0].max"), std::string::npos) << e.what();
+  }
+  const std::string bad_param = ::testing::TempDir() + "bad_param.json";
+  std::ofstream(bad_param) << R"({"name": "x", "parametric": {"seat_height": 0.4, "legs": 3}})";
+  try {
+    Chair::Load(bad_param);
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find(bad_param + ".parametric: unknown field 'legs'"), std::string::npos)
+        << e.what();
+  }
+  try {
+    EnvConfig::FromJson(Json{{"physics", {{"substeps", "four"}}}}, "run.json");
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("run.json.physics.substeps"), std::string::npos) << e.what();
+  }
+  try {
+    EnvConfig::FromJson(Json{{"action_mode", "velocity"}}, "run.json");
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("run.json.action_mode"), std::string::npos) << e.what();
+  }
+}
+
+TEST(HumanoidEnv, ChairPresetsLoad) {
+  for (const char* name : {"authors", "stool", "armchair", "low", "high", "bench"}) {
+    const Chair c = Chair::Load(Chair::PresetPath(name));
+    EXPECT_GE(c.seat_box, 0) << name;
+    EXPECT_GT(c.seat_height(), 0.3) << name;
+  }
+  const Chair a = Chair::Load(Chair::PresetPath("authors"));
+  EXPECT_EQ(a.boxes.size(), 6u);
+  EXPECT_NEAR(a.seat_height(), 0.4029, 1e-12);
+  EXPECT_NEAR(a.seat_target.z(), 0.4015, 1e-12);
+  EXPECT_TRUE(a.dynamic);
+  EXPECT_FALSE(Chair::Load(Chair::PresetPath("bench")).dynamic);
+  const Chair stool = Chair::Load(Chair::PresetPath("stool"));
+  for (const ChairBox& b : stool.boxes) EXPECT_NE(b.role, "backrest");
+}
+
+TEST(HumanoidEnv, ConfigRoundTrip) {
+  EnvConfig c;
+  c.action_mode = ActionMode::kPd;
+  c.obs_layout = ObsLayout::kProprioChair;
+  c.spawn.zone = 3;
+  c.chair_placement.yaw = 0.5;
+  c.physics.solver_iterations = 7;
+  const Json j = c.ToJson();
+  const EnvConfig back = EnvConfig::FromJson(j, "x");
+  EXPECT_EQ(back.ToJson(), j);
+}
+
+// Columns 8..49 of the authors' obs arrays are (q_n, 0.1 qdot) for the same qpos row (notes 7.2).
+TEST(HumanoidEnv, JointNormalisationMatchesAuthorsObsArrays) {
+  const std::string path = SharedDir() + "/reference/cmu_mocap_turn.npz";
+  if (!Exists(path)) GTEST_SKIP() << path << " absent";
+  const auto arrays = LoadNpz(path);
+  const NpyArray& qpos = arrays.at("qpos");
+  const NpyArray& ref = arrays.at("obs");
+  ASSERT_EQ(qpos.shape.back(), 51);
+  ASSERT_EQ(ref.shape.back(), 52);
+  HumanoidChairEnv env(EnvConfig{});
+  std::vector<float> obs(env.spec().obs_dim);
+  const int64_t rows = qpos.size() / 51;
+  int checked = 0;
+  for (int64_t r = 0; r < rows; r += 97) {
+    env.ResetFromQpos(qpos.values.data() + 51 * r, obs.data());
+    for (int k = 0; k < 42; ++k) {
+      EXPECT_NEAR(obs[kJoints + k], ref.values[52 * r + 8 + k], 2e-4) << "row " << r << " col " << 8 + k;
+    }
+    // Root height, roll and pitch also match (columns 0, 6, 7).
+    EXPECT_NEAR(obs[0], ref.values[52 * r + 0], 1e-4);
+    EXPECT_NEAR(obs[1], ref.values[52 * r + 6], 1e-4);
+    EXPECT_NEAR(obs[2], ref.values[52 * r + 7], 1e-4);
+    ++checked;
+  }
+  EXPECT_GT(checked, 20);
+}
+
+TEST(HumanoidEnv, Zone1StartsFromTheAuthorsWalkFrame) {
+  const std::string path = SharedDir() + "/reference/cmu_mocap_walk_plain.npz";
+  if (!Exists(path)) GTEST_SKIP() << path << " absent";
+  EnvConfig c;
+  c.init.qpos_file = "../shared/reference/cmu_mocap_walk_plain.npz";
+  c.spawn.zone = 1;
+  HumanoidChairEnv env(c);
+  // Notes 6: clip 08_04 frame 31, root z 1.200, roll -0.021, pitch 0.145, ~1.14 m/s forward.
+  EXPECT_NEAR(env.init_pose().root_pos.z(), 1.200, 0.002);
+  EXPECT_NEAR(RpyFromQuat(env.init_pose().root_quat).y(), 0.145, 0.002);
+  EXPECT_NEAR(env.init_pose().root_lin_vel.head<2>().norm(), 1.14, 0.05);
+  std::vector<float> obs(env.spec().obs_dim);
+  env.Seed(2);
+  for (int i = 0; i < 5; ++i) {
+    env.Reset(obs.data());
+    const Eigen::Vector3d p = env.humanoid_state().root_pos;
+    EXPECT_NEAR(Eigen::Vector2d(p.x() - 0.45, p.y()).norm(), 1.5, 1e-4);
+    EXPECT_GE(p.x(), 0.45 - 1e-9);  // front half plane
+    // Moving towards the chair side: velocity points roughly at the centre.
+    const Eigen::Vector2d v = env.humanoid_state().root_lin_vel.head<2>();
+    const Eigen::Vector2d to_center = Eigen::Vector2d(0.45 - p.x(), -p.y()).normalized();
+    EXPECT_GT(v.normalized().dot(to_center), 0.9);
+  }
+}
+
+}  // namespace
+}  // namespace perch
