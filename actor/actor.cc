@@ -1,0 +1,215 @@
+#include "actor/actor.h"
+
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <thread>
+
+#include "common/proto/model.pb.h"
+#include "learner/service/learner.h"
+#include "learner/service/wire.h"
+
+namespace perch {
+
+ActorService::ActorService(zmq::context_t& ctx, const ActorSetup& setup,
+                           const ActorOptions& options)
+    : setup_(setup),
+      options_(options),
+      task_(TaskFromName(setup.cluster.task, "cluster.task")),
+      push_(ctx, zmq::socket_type::push),
+      sub_(ctx, zmq::socket_type::sub),
+      runner_(setup.policy, setup.obs_norm),
+      // Same seed and actor id -> same stream of actions and env episodes.
+      rng_(setup.seed * 0x9E3779B97F4A7C15ULL + options.actor_id + 1) {
+  if (options_.num_envs < 1) throw ConfigError("--envs: must be >= 1");
+  // An identifier of this process start (not used for any result).
+  Rng id_rng(static_cast<uint64_t>(MonotonicSeconds() * 1e9) ^
+             (static_cast<uint64_t>(::getpid()) << 20) ^ options.actor_id);
+  instance_ = id_rng.NextU64();
+  for (int i = 0; i < options_.num_envs; ++i) {
+    envs_.push_back(setup_.make_env());
+    Env* env = envs_.back().get();
+    if (env->spec().obs_dim != setup_.policy.obs_dim) {
+      throw ConfigError("actor: env obs_dim " + std::to_string(env->spec().obs_dim) +
+                        " != policy obs_dim " + std::to_string(setup_.policy.obs_dim));
+    }
+    env->Seed(rng_.NextU64());
+    const uint64_t stream = (uint64_t{options_.actor_id} << 20) | static_cast<uint64_t>(i);
+    collectors_.push_back(
+        std::make_unique<HierarchicalCollector>(env, stream, setup_.cluster.hierarchy_meta_period));
+  }
+  push_.set(zmq::sockopt::immediate, 1);  // queue only to a connected learner
+  push_.set(zmq::sockopt::sndhwm, options_.num_envs);
+  push_.set(zmq::sockopt::sndtimeo, 200);
+  push_.set(zmq::sockopt::linger, 1000);
+  push_.set(zmq::sockopt::reconnect_ivl, setup_.cluster.reconnect_ivl_ms);
+  sub_.set(zmq::sockopt::reconnect_ivl, setup_.cluster.reconnect_ivl_ms);
+  sub_.set(zmq::sockopt::maxmsgsize, static_cast<int64_t>(setup_.cluster.max_message_bytes));
+  sub_.set(zmq::sockopt::subscribe, "");
+  sub_.set(zmq::sockopt::linger, 0);
+  push_.connect(options_.rollout_connect);
+  sub_.connect(options_.weights_connect);
+}
+
+ActorService::~ActorService() = default;
+
+bool ActorService::Send(const std::string& bytes) {
+  while (!Stopping()) {
+    try {
+      if (push_.send(zmq::buffer(bytes), zmq::send_flags::none)) {
+        counters_.bytes_sent += bytes.size();
+        return true;
+      }
+    } catch (const zmq::error_t& e) {
+      if (e.num() != EINTR) throw;
+    }
+    // Timed out: the learner is away (restarting). Keep weights fresh meanwhile.
+    PollWeights(0);
+  }
+  return false;
+}
+
+void ActorService::SendHello() {
+  proto::ActorMessage m;
+  m.set_wire_version(proto::WIRE_VERSION_CURRENT);
+  proto::Hello* h = m.mutable_hello();
+  h->set_actor_id(options_.actor_id);
+  h->set_actor_instance(instance_);
+  char host[256] = {0};
+  ::gethostname(host, sizeof(host) - 1);
+  h->set_hostname(host);
+  h->set_num_envs(options_.num_envs);
+  h->set_env_name(envs_[0]->spec().name);
+  h->set_obs_dim(envs_[0]->spec().obs_dim);
+  h->set_act_dim(envs_[0]->spec().act_dim);
+  Send(m.SerializeAsString());
+}
+
+void ActorService::MaybeHeartbeat() {
+  const double now = MonotonicSeconds();
+  if (now - last_heartbeat_s_ < setup_.cluster.heartbeat_s) return;
+  last_heartbeat_s_ = now;
+  proto::ActorMessage m;
+  m.set_wire_version(proto::WIRE_VERSION_CURRENT);
+  proto::Heartbeat* h = m.mutable_heartbeat();
+  h->set_actor_id(options_.actor_id);
+  h->set_actor_instance(instance_);
+  h->set_env_steps(counters_.env_steps);
+  h->set_segments_sent(counters_.segments_sent);
+  h->set_weights_version(runner_.version());
+  h->set_uptime_s(now - start_s_);
+  Send(m.SerializeAsString());
+}
+
+bool ActorService::PollWeights(int timeout_ms) {
+  zmq::message_t msg, newest;
+  bool got = false;
+  zmq::pollitem_t item{sub_.handle(), 0, ZMQ_POLLIN, 0};
+  if (zmq::poll(&item, 1, std::chrono::milliseconds(timeout_ms)) <= 0) return false;
+  while (sub_.recv(msg, zmq::recv_flags::dontwait)) {
+    newest.move(msg);
+    got = true;
+  }
+  if (!got) return false;
+  proto::LearnerMessage m;
+  std::string why;
+  if (ParseLearnerMessage(newest.data(), newest.size(), setup_.cluster.max_message_bytes, &m,
+                          &why) != WireReject::kOk) {
+    ++counters_.weights_rejected;
+    spdlog::warn("actor {}: dropped weights message: {}", options_.actor_id, why);
+    return false;
+  }
+  const proto::Weights& w = m.weights();
+  if (have_weights_ && w.run_id() == weights_run_id_ && w.version() == runner_.version()) {
+    return false;  // a republish for someone else
+  }
+  for (const proto::TaskPolicy& p : w.policies()) {
+    if (p.task() != task_) continue;
+    try {
+      runner_.LoadWeights(p.model());
+    } catch (const ConfigError& e) {
+      ++counters_.weights_rejected;
+      spdlog::error("actor {}: weights do not fit this actor: {}", options_.actor_id, e.what());
+      return false;
+    }
+    if (have_weights_ && w.run_id() != weights_run_id_) {
+      spdlog::info("actor {}: learner run changed, now at version {}", options_.actor_id,
+                   w.version());
+    }
+    weights_run_id_ = w.run_id();
+    have_weights_ = true;
+    ++counters_.weights_loaded;
+    return true;
+  }
+  ++counters_.weights_rejected;
+  spdlog::error("actor {}: weights hold no policy for task {}", options_.actor_id, TaskName(task_));
+  return false;
+}
+
+void ActorService::Run() {
+  start_s_ = MonotonicSeconds();
+  last_heartbeat_s_ = start_s_;
+  SendHello();
+  double waited_since = MonotonicSeconds();
+  while (!have_weights_ && !Stopping()) {
+    PollWeights(200);
+    if (!have_weights_ && MonotonicSeconds() - waited_since > 10.0) {
+      spdlog::info("actor {}: waiting for weights from {}", options_.actor_id,
+                   options_.weights_connect);
+      waited_since = MonotonicSeconds();
+    }
+  }
+  if (have_weights_) {
+    spdlog::info("actor {}: {} envs, weights version {}", options_.actor_id, options_.num_envs,
+                 runner_.version());
+  }
+  std::vector<Rollout> rollouts(envs_.size());
+  proto::ActorMessage m;
+  m.set_wire_version(proto::WIRE_VERSION_CURRENT);
+  std::vector<uint64_t> segment_index(envs_.size(), 0);
+  const std::vector<PolicyRunner*> no_subtasks;
+  for (int64_t seg = 0; !Stopping() && (options_.max_segments == 0 || seg < options_.max_segments);
+       ++seg) {
+    // One segment per env with the same weights, then take new weights (between segments).
+    for (size_t i = 0; i < envs_.size() && !Stopping(); ++i) {
+      EpisodeStats eps;
+      collectors_[i]->Collect(&runner_, no_subtasks, rng_, setup_.cluster.segment_steps,
+                              &rollouts[i], &eps);
+      counters_.env_steps += rollouts[i].size();
+      counters_.episodes += eps.returns.size();
+      proto::Segment* s = m.mutable_segment();
+      s->Clear();
+      s->set_actor_id(options_.actor_id);
+      s->set_actor_instance(instance_);
+      s->set_env_index(static_cast<uint32_t>(i));
+      s->set_segment_index(segment_index[i]++);
+      s->set_task(task_);
+      proto::PolicyVersion* pv = s->add_policy_versions();
+      pv->set_task(task_);
+      pv->set_version(runner_.version());
+      rollouts[i].ToProto(s->mutable_rollout());
+      // Episodes ended, in order, at the steps flagged terminated or truncated.
+      size_t e = 0;
+      const Rollout& r = rollouts[i];
+      for (int t = 0; t < r.size() && e < eps.returns.size(); ++t) {
+        if (!r.terminated[t] && !r.truncated[t]) continue;
+        proto::EpisodeStats* es = s->add_episodes();
+        es->set_episode_return(eps.returns[e]);
+        es->set_length(static_cast<uint32_t>(eps.lengths[e]));
+        es->set_terminated(r.terminated[t] != 0);
+        ++e;
+      }
+      s->set_bootstrap_value(
+          rollouts[i].bootstrap_values.empty() ? 0.0f : rollouts[i].bootstrap_values.back());
+      if (!Send(m.SerializeAsString())) break;
+      ++counters_.segments_sent;
+    }
+    PollWeights(0);
+    MaybeHeartbeat();
+  }
+  spdlog::info("actor {}: stopped after {} segments, {} env steps", options_.actor_id,
+               counters_.segments_sent, counters_.env_steps);
+}
+
+}  // namespace perch

@@ -1,0 +1,86 @@
+// The actor role: steps several envs in one process with the current policy, ships fixed-length
+// rollout segments (PUSH) and takes new weights (SUB) between segments. Reconnects by itself when
+// the learner restarts (ZeroMQ reconnects; the learner republishes weights on every
+// (re)subscription). The same class runs in `perch actor` (tcp://) and inside tests (inproc://).
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+#include <zmq.hpp>
+
+#include "actor/hierarchy.h"
+#include "common/env.h"
+#include "common/proto/wire.pb.h"
+#include "common/rng.h"
+#include "learner/policy.h"
+#include "learner/rollout.h"
+#include "learner/service/cluster_config.h"
+
+namespace perch {
+
+struct ActorSetup {
+  uint64_t seed = 0;
+  PolicyConfig policy;  // of the trained task
+  NormalizerConfig obs_norm;
+  ClusterConfig cluster;
+  std::function<std::unique_ptr<Env>()> make_env;
+};
+
+struct ActorOptions {
+  std::string rollout_connect = "tcp://127.0.0.1:5555";
+  std::string weights_connect = "tcp://127.0.0.1:5556";
+  uint32_t actor_id = 0;
+  int num_envs = 4;
+  int64_t max_segments = 0;  // per env; 0: until stopped (tests and benchmarks bound it)
+  const std::atomic<bool>* stop = nullptr;
+};
+
+struct ActorCounters {
+  uint64_t env_steps = 0;
+  uint64_t segments_sent = 0;
+  uint64_t weights_loaded = 0;
+  uint64_t weights_rejected = 0;
+  uint64_t bytes_sent = 0;
+  uint64_t episodes = 0;
+};
+
+class ActorService {
+ public:
+  ActorService(zmq::context_t& ctx, const ActorSetup& setup, const ActorOptions& options);
+  ~ActorService();
+
+  // Waits for the first weights, then collects and sends segments until stopped.
+  void Run();
+  const ActorCounters& counters() const { return counters_; }
+  uint64_t weights_version() const { return runner_.version(); }
+
+ private:
+  bool Stopping() const { return options_.stop && options_.stop->load(); }
+  // Applies the newest weights waiting on the socket; blocks up to timeout_ms for one.
+  bool PollWeights(int timeout_ms);
+  bool Send(const std::string& bytes);  // false when stopped before it could be queued
+  void SendHello();
+  void MaybeHeartbeat();
+
+  ActorSetup setup_;
+  ActorOptions options_;
+  proto::Task task_;
+  uint64_t instance_ = 0;
+  zmq::socket_t push_;
+  zmq::socket_t sub_;
+  PolicyRunner runner_;
+  uint64_t weights_run_id_ = 0;
+  bool have_weights_ = false;
+  std::vector<std::unique_ptr<Env>> envs_;
+  std::vector<std::unique_ptr<HierarchicalCollector>> collectors_;
+  Rng rng_;
+  ActorCounters counters_;
+  double start_s_ = 0.0;
+  double last_heartbeat_s_ = 0.0;
+};
+
+}  // namespace perch

@@ -1,0 +1,84 @@
+#include "actor/experiment.h"
+
+#ifdef PERCH_HAVE_ENVS
+#include "envs/env_config.h"
+#include "envs/humanoid_env.h"
+#endif
+
+namespace perch {
+
+ExperimentConfig ExperimentConfigFromJson(const Json& j, const std::string& ctx) {
+  CheckKnownKeys(j, {"seed", "env_backend", "env", "mock_env", "policy", "ppo", "cluster"}, ctx);
+  ExperimentConfig c;
+  c.source = ctx;
+  GetOptional(j, "seed", c.seed, ctx);
+  GetOptional(j, "env_backend", c.env_backend, ctx);
+  if (c.env_backend != "bullet" && c.env_backend != "mock") {
+    throw ConfigError(ctx + ".env_backend: expected \"bullet\" or \"mock\", got \"" +
+                      c.env_backend + "\"");
+  }
+  if (j.contains("env")) {
+    if (!j["env"].is_object()) throw ConfigError(ctx + ".env: expected an object");
+    c.env = j["env"];
+  }
+  if (j.contains("mock_env")) c.mock_env = MockEnvConfigFromJson(j["mock_env"], ctx + ".mock_env");
+  if (j.contains("policy")) {
+    if (!j["policy"].is_object()) throw ConfigError(ctx + ".policy: expected an object");
+    c.policy = j["policy"];
+  }
+  c.ppo = j.contains("ppo") ? PpoConfigFromJson(j["ppo"], ctx + ".ppo") : PpoConfig::Subtask();
+  if (j.contains("cluster")) c.cluster = ClusterConfigFromJson(j["cluster"], ctx + ".cluster");
+  return c;
+}
+
+ExperimentConfig LoadExperimentConfig(const std::string& path) {
+  ExperimentConfig c = ExperimentConfigFromJson(LoadJsonFile(path), path);
+  // Building one env validates the env section; resolving the policy checks the dims.
+  std::unique_ptr<Env> env = MakeExperimentEnv(c);
+  ResolvePolicyConfig(c, env->spec());
+  return c;
+}
+
+Json ToJson(const ExperimentConfig& c) {
+  Json j{{"seed", c.seed},
+         {"env_backend", c.env_backend},
+         {"env", c.env},
+         {"mock_env", ToJson(c.mock_env)},
+         {"policy", c.policy},
+         {"ppo", ToJson(c.ppo)},
+         {"cluster", ToJson(c.cluster)}};
+  return j;
+}
+
+std::unique_ptr<Env> MakeExperimentEnv(const ExperimentConfig& c) {
+  if (c.env_backend == "mock") return std::make_unique<MockEnv>(c.mock_env);
+#ifdef PERCH_HAVE_ENVS
+  return MakeEnv(EnvConfig::FromJson(c.env, c.source + ".env"));
+#else
+  throw ConfigError(c.source + ".env_backend: \"bullet\": this build has no envs/ library");
+#endif
+}
+
+PolicyConfig ResolvePolicyConfig(const ExperimentConfig& c, const EnvSpec& spec) {
+  const std::string ctx = c.source + ".policy";
+  Json p = c.policy;
+  const bool meta = c.cluster.task == "meta";
+  for (const char* dim : {"obs_dim", "act_dim"}) {
+    const int want = std::string(dim) == "obs_dim" ? spec.obs_dim : spec.act_dim;
+    if (p.contains(dim) && !meta && p[dim] != want) {
+      throw ConfigError(ctx + "." + dim + ": " + p[dim].dump() + " but the env has " +
+                        std::to_string(want));
+    }
+  }
+  p["obs_dim"] = spec.obs_dim;
+  if (!meta) p["act_dim"] = spec.act_dim;
+  if (!p.contains("kind")) p["kind"] = meta ? "meta" : "gaussian";
+  return PolicyConfigFromJson(p, ctx);
+}
+
+std::string CompatKey(const ExperimentConfig& c, const PolicyConfig& policy) {
+  Json pj = ToJson(policy);
+  return Json{{"task", c.cluster.task}, {"env_backend", c.env_backend}, {"policy", pj}}.dump();
+}
+
+}  // namespace perch

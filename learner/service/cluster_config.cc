@@ -1,0 +1,141 @@
+#include "learner/service/cluster_config.h"
+
+#include <cstdlib>
+
+namespace perch {
+
+Json ToJson(const ClusterConfig& c) {
+  return Json{{"task", c.task},
+              {"segment_steps", c.segment_steps},
+              {"envs_per_actor", c.envs_per_actor},
+              {"max_policy_lag", c.max_policy_lag},
+              {"checkpoint_every", c.checkpoint_every},
+              {"keep_last", c.keep_last},
+              {"milestone_every", c.milestone_every},
+              {"heartbeat_s", c.heartbeat_s},
+              {"actor_timeout_s", c.actor_timeout_s},
+              {"max_message_bytes", c.max_message_bytes},
+              {"max_segment_steps", c.max_segment_steps},
+              {"reconnect_ivl_ms", c.reconnect_ivl_ms},
+              {"hierarchy_meta_period", c.hierarchy_meta_period},
+              {"hierarchy_enabled", c.hierarchy_enabled},
+              {"restart_backoff_ms", c.restart_backoff_ms},
+              {"learner_queue_segments", c.learner_queue_segments}};
+}
+
+namespace {
+void CheckMin(const std::string& ctx, const char* field, double v, double lo) {
+  if (v < lo) {
+    throw ConfigError(ctx + "." + field + ": must be >= " + std::to_string(lo) + ", got " +
+                      std::to_string(v));
+  }
+}
+}  // namespace
+
+ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
+  CheckKnownKeys(
+      j,
+      {"task", "segment_steps", "envs_per_actor", "max_policy_lag", "checkpoint_every", "keep_last",
+       "milestone_every", "heartbeat_s", "actor_timeout_s", "max_message_bytes",
+       "max_segment_steps", "reconnect_ivl_ms", "hierarchy_meta_period", "hierarchy_enabled",
+       "restart_backoff_ms", "learner_queue_segments"},
+      ctx);
+  ClusterConfig c;
+  GetOptional(j, "task", c.task, ctx);
+  GetOptional(j, "segment_steps", c.segment_steps, ctx);
+  GetOptional(j, "envs_per_actor", c.envs_per_actor, ctx);
+  GetOptional(j, "max_policy_lag", c.max_policy_lag, ctx);
+  GetOptional(j, "checkpoint_every", c.checkpoint_every, ctx);
+  GetOptional(j, "keep_last", c.keep_last, ctx);
+  GetOptional(j, "milestone_every", c.milestone_every, ctx);
+  GetOptional(j, "heartbeat_s", c.heartbeat_s, ctx);
+  GetOptional(j, "actor_timeout_s", c.actor_timeout_s, ctx);
+  GetOptional(j, "max_message_bytes", c.max_message_bytes, ctx);
+  GetOptional(j, "max_segment_steps", c.max_segment_steps, ctx);
+  GetOptional(j, "reconnect_ivl_ms", c.reconnect_ivl_ms, ctx);
+  GetOptional(j, "hierarchy_meta_period", c.hierarchy_meta_period, ctx);
+  GetOptional(j, "hierarchy_enabled", c.hierarchy_enabled, ctx);
+  GetOptional(j, "restart_backoff_ms", c.restart_backoff_ms, ctx);
+  GetOptional(j, "learner_queue_segments", c.learner_queue_segments, ctx);
+  TaskFromName(c.task, ctx + ".task");
+  CheckMin(ctx, "segment_steps", c.segment_steps, 1);
+  CheckMin(ctx, "envs_per_actor", c.envs_per_actor, 1);
+  CheckMin(ctx, "max_policy_lag", c.max_policy_lag, 0);
+  CheckMin(ctx, "checkpoint_every", c.checkpoint_every, 1);
+  CheckMin(ctx, "keep_last", c.keep_last, 1);
+  CheckMin(ctx, "milestone_every", c.milestone_every, 0);
+  CheckMin(ctx, "heartbeat_s", c.heartbeat_s, 0.01);
+  CheckMin(ctx, "actor_timeout_s", c.actor_timeout_s, 0.01);
+  CheckMin(ctx, "max_message_bytes", c.max_message_bytes, 1024);
+  CheckMin(ctx, "max_segment_steps", c.max_segment_steps, 1);
+  CheckMin(ctx, "reconnect_ivl_ms", c.reconnect_ivl_ms, 1);
+  CheckMin(ctx, "hierarchy_meta_period", c.hierarchy_meta_period, 1);
+  CheckMin(ctx, "restart_backoff_ms", c.restart_backoff_ms, 0);
+  CheckMin(ctx, "learner_queue_segments", c.learner_queue_segments, 1);
+  if (c.segment_steps > c.max_segment_steps) {
+    throw ConfigError(ctx + ".segment_steps: " + std::to_string(c.segment_steps) +
+                      " exceeds max_segment_steps " + std::to_string(c.max_segment_steps));
+  }
+  return c;
+}
+
+proto::Task TaskFromName(const std::string& name, const std::string& ctx) {
+  if (name == "walk") return proto::TASK_WALK;
+  if (name == "left_turn") return proto::TASK_LEFT_TURN;
+  if (name == "right_turn") return proto::TASK_RIGHT_TURN;
+  if (name == "sit") return proto::TASK_SIT;
+  if (name == "meta") return proto::TASK_META;
+  if (name == "stand") return proto::TASK_STAND;
+  throw ConfigError(ctx + ": unknown task '" + name +
+                    "' (walk, left_turn, right_turn, sit, meta, stand)");
+}
+
+std::string TaskName(proto::Task task) {
+  switch (task) {
+    case proto::TASK_WALK:
+      return "walk";
+    case proto::TASK_LEFT_TURN:
+      return "left_turn";
+    case proto::TASK_RIGHT_TURN:
+      return "right_turn";
+    case proto::TASK_SIT:
+      return "sit";
+    case proto::TASK_META:
+      return "meta";
+    case proto::TASK_STAND:
+      return "stand";
+    default:
+      return "unspecified";
+  }
+}
+
+void CheckPort(int port, const std::string& flag) {
+  if (port < 1 || port > 65535) {
+    throw ConfigError(flag + ": port must be in 1..65535, got " + std::to_string(port));
+  }
+}
+
+void CheckEndpoint(const std::string& e, const std::string& flag) {
+  auto starts = [&](const char* p) { return e.rfind(p, 0) == 0; };
+  if (starts("inproc://") || starts("ipc://")) {
+    if (e.find("://") + 3 >= e.size())
+      throw ConfigError(flag + ": empty endpoint name in '" + e + "'");
+    return;
+  }
+  if (!starts("tcp://")) {
+    throw ConfigError(flag + ": expected tcp://HOST:PORT, inproc://NAME or ipc://PATH, got '" + e +
+                      "'");
+  }
+  const size_t colon = e.rfind(':');
+  if (colon == std::string::npos || colon < 6 || colon + 1 >= e.size() || colon == 3) {
+    throw ConfigError(flag + ": missing port in '" + e + "'");
+  }
+  const std::string host = e.substr(6, colon - 6);
+  if (host.empty()) throw ConfigError(flag + ": missing host in '" + e + "'");
+  char* end = nullptr;
+  const long port = std::strtol(e.c_str() + colon + 1, &end, 10);
+  if (*end != '\0') throw ConfigError(flag + ": bad port in '" + e + "'");
+  CheckPort(static_cast<int>(port), flag);
+}
+
+}  // namespace perch

@@ -1,0 +1,48 @@
+// Settings of the cluster roles (learner, actor, launcher): the "cluster" section of an experiment
+// config. Defaults follow the authors where they had an equivalent (checkpoint every 100 updates,
+// notes §8.1); the rest are transport choices documented in docs/cluster.md.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "common/json_util.h"
+#include "common/proto/wire.pb.h"
+
+namespace perch {
+
+struct ClusterConfig {
+  // Which policy of the hierarchy is trained: walk, left_turn, right_turn, sit, meta, stand.
+  std::string task = "stand";
+  int segment_steps = 256;           // T: control steps per rollout segment
+  int envs_per_actor = 4;            // default for `perch actor --envs`
+  int max_policy_lag = 2;            // segments from versions older than current - lag are dropped
+  int checkpoint_every = 100;        // updates between checkpoints (authors: 100)
+  int keep_last = 3;                 // rotated checkpoints kept
+  int milestone_every = 1000;        // updates; checkpoints at multiples are kept forever (0: none)
+  double heartbeat_s = 5.0;          // actor -> learner heartbeat period
+  double actor_timeout_s = 30.0;     // an actor silent this long is counted as gone
+  int max_message_bytes = 64 << 20;  // bigger messages are dropped unparsed
+  int max_segment_steps = 8192;      // T above this is rejected
+  int reconnect_ivl_ms = 200;        // ZeroMQ reconnect interval
+  int hierarchy_meta_period = 30;    // control steps per meta decision (notes §4.7)
+  bool hierarchy_enabled = false;    // run the 2 Hz meta policy over the subtasks
+  int restart_backoff_ms = 500;      // `perch train`: wait before restarting a dead actor
+  // Segments queued per actor connection at the learner (ZeroMQ receive high-water mark). Small,
+  // so that a fast actor blocks instead of filling a queue whose tail would be stale on arrival.
+  int learner_queue_segments = 16;
+};
+
+Json ToJson(const ClusterConfig& c);
+ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx);
+
+// "walk" -> TASK_WALK, ...; throws ConfigError naming ctx for an unknown name.
+proto::Task TaskFromName(const std::string& name, const std::string& ctx);
+std::string TaskName(proto::Task task);
+
+// Port numbers from a --*-port flag: 1..65535, else ConfigError naming the flag.
+void CheckPort(int port, const std::string& flag);
+// A ZeroMQ endpoint: tcp://HOST:PORT, tcp://*:PORT, inproc://NAME or ipc://PATH.
+void CheckEndpoint(const std::string& endpoint, const std::string& flag);
+
+}  // namespace perch

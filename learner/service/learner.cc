@@ -1,0 +1,417 @@
+#include "learner/service/learner.h"
+
+#include <spdlog/spdlog.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <numeric>
+
+#include "common/proto/model.pb.h"
+
+namespace perch {
+
+double MonotonicSeconds() {
+  using namespace std::chrono;
+  return duration<double>(steady_clock::now().time_since_epoch()).count();
+}
+
+namespace {
+
+void MakeDir(const std::string& path) {
+  std::string cur;
+  for (size_t i = 0; i <= path.size(); ++i) {
+    if (i == path.size() || path[i] == '/') {
+      if (!cur.empty()) ::mkdir(cur.c_str(), 0755);
+    }
+    if (i < path.size()) cur.push_back(path[i]);
+  }
+  struct stat st;
+  if (::stat(path.c_str(), &st) != 0 || !S_ISDIR(st.st_mode)) {
+    throw ConfigError("--run-dir " + path + ": cannot create directory");
+  }
+}
+
+uint64_t FreshRunId(uint64_t seed) {
+  // Identifies the run, not part of any result: mixing in time and pid is fine here.
+  Rng r(seed ^ static_cast<uint64_t>(MonotonicSeconds() * 1e9) ^
+        (static_cast<uint64_t>(::getpid()) << 32));
+  return r.NextU64();
+}
+
+double Mean(const std::vector<double>& v) {
+  return v.empty() ? 0.0 : std::accumulate(v.begin(), v.end(), 0.0) / v.size();
+}
+
+}  // namespace
+
+LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
+                               const LearnerOptions& options)
+    : setup_(setup),
+      options_(options),
+      task_(TaskFromName(setup.cluster.task, "cluster.task")),
+      store_(options.run_dir, setup.cluster.keep_last, setup.cluster.milestone_every),
+      rng_(setup.seed),
+      rollout_sock_(ctx, zmq::socket_type::pull),
+      weights_sock_(ctx, zmq::socket_type::xpub) {
+  if (options_.run_dir.empty()) throw ConfigError("--run-dir: required");
+  limits_.max_message_bytes = static_cast<size_t>(setup.cluster.max_message_bytes);
+  limits_.max_segment_steps = setup.cluster.max_segment_steps;
+  limits_.obs_dim = setup.policy.obs_dim;
+  limits_.act_dim = setup.policy.action_size();
+  ppo_ = std::make_unique<PpoLearner>(setup.policy, setup.ppo, setup.seed);
+  MakeDir(options_.run_dir);
+  Resume();
+
+  // Every run (and every restart of it) records its resolved config and seed.
+  Json record = setup_.resolved_config;
+  record["seed"] = setup_.seed;
+  SaveJsonFileAtomic(options_.run_dir + "/config.json", record);
+
+  // Bigger messages make ZeroMQ drop the sender's connection before they are read into memory.
+  rollout_sock_.set(zmq::sockopt::maxmsgsize, static_cast<int64_t>(limits_.max_message_bytes));
+  rollout_sock_.set(zmq::sockopt::rcvhwm, setup.cluster.learner_queue_segments);
+  rollout_sock_.set(zmq::sockopt::linger, 0);
+  weights_sock_.set(zmq::sockopt::xpub_verbose, 1);  // see every (re)subscription
+  weights_sock_.set(zmq::sockopt::sndhwm, 100);
+  weights_sock_.set(zmq::sockopt::linger, 0);
+  rollout_sock_.bind(options_.rollout_bind);
+  weights_sock_.bind(options_.weights_bind);
+  if (options_.metrics_port >= 0) metrics_ = std::make_unique<MetricsServer>(options_.metrics_port);
+  spdlog::info(
+      "learner: task {} obs_dim {} action_size {} batch {} samples; rollouts on {}, "
+      "weights on {}, metrics on {}",
+      setup_.cluster.task, limits_.obs_dim, limits_.act_dim, setup_.ppo.steps_per_update,
+      options_.rollout_bind, options_.weights_bind,
+      metrics_ ? ":" + std::to_string(metrics_->port()) + "/metrics" : "off");
+}
+
+LearnerService::~LearnerService() = default;
+
+void LearnerService::Resume() {
+  const std::vector<uint64_t> present = store_.List();
+  if (!options_.resume) {
+    if (!present.empty()) {
+      throw ConfigError("--run-dir " + options_.run_dir + ": holds checkpoints (latest " +
+                        store_.PathFor(present.back()) +
+                        "); pass --resume to continue that run or choose another --run-dir");
+    }
+    run_id_ = FreshRunId(setup_.seed);
+    return;
+  }
+  if (present.empty()) {
+    spdlog::warn("learner: --resume but no checkpoint in {}; starting a new run", store_.dir());
+    run_id_ = FreshRunId(setup_.seed);
+    return;
+  }
+  auto accept = [&](const proto::Checkpoint& c) {
+    if (c.compat_key() != setup_.compat_key) {
+      throw CheckpointError("checkpoint update " + std::to_string(c.counters().updates()) +
+                            " was made with an incompatible config (task/dims/network): " +
+                            c.compat_key() + " vs now " + setup_.compat_key);
+    }
+    try {
+      ppo_->ImportState(c.trainer(), "checkpoint update " + std::to_string(c.counters().updates()));
+    } catch (const ConfigError& e) {
+      throw CheckpointError(e.what());
+    }
+  };
+  proto::Checkpoint ckpt;
+  std::vector<std::string> errors;
+  if (!store_.LoadLatestGood(
+          accept, [](const std::string& w) { spdlog::error("learner: {}", w); }, &ckpt,
+          &resumed_from_, &errors)) {
+    std::string all;
+    for (const auto& e : errors) all += "\n  " + e;
+    throw CheckpointError("--resume: no usable checkpoint in " + store_.dir() + ":" + all);
+  }
+  counters_ = ckpt.counters();
+  run_id_ = ckpt.run_id();
+  if (ckpt.rng().s_size() == 4) {
+    Rng::State st{{ckpt.rng().s(0), ckpt.rng().s(1), ckpt.rng().s(2), ckpt.rng().s(3)},
+                  ckpt.rng().has_spare(),
+                  ckpt.rng().spare()};
+    rng_.SetState(st);
+  }
+  train_time_base_s_ = counters_.train_time_s();
+  last_checkpoint_update_ = static_cast<int64_t>(counters_.updates());
+  spdlog::info("learner: resumed from {} (update {}, {} samples)", resumed_from_,
+               counters_.updates(), counters_.samples());
+}
+
+std::string LearnerService::SaveCheckpoint() {
+  proto::Checkpoint c;
+  c.set_wire_version(proto::WIRE_VERSION_CURRENT);
+  c.set_run_id(run_id_);
+  counters_.set_train_time_s(train_time_base_s_ + MonotonicSeconds() - start_s_);
+  *c.mutable_counters() = counters_;
+  proto::TaskPolicy* tp = c.mutable_weights()->add_policies();
+  tp->set_task(task_);
+  ppo_->ExportWeights(tp->mutable_model());
+  c.mutable_weights()->set_version(version());
+  c.mutable_weights()->set_run_id(run_id_);
+  ppo_->ExportState(c.mutable_trainer());
+  const Rng::State st = rng_.GetState();
+  for (uint64_t w : st.s) c.mutable_rng()->add_s(w);
+  c.mutable_rng()->set_has_spare(st.has_spare);
+  c.mutable_rng()->set_spare(st.spare);
+  Json record = setup_.resolved_config;
+  record["seed"] = setup_.seed;
+  c.set_resolved_config_json(record.dump());
+  c.set_compat_key(setup_.compat_key);
+  c.set_seed(setup_.seed);
+  const std::string path = store_.Save(c);
+  last_checkpoint_update_ = static_cast<int64_t>(counters_.updates());
+  spdlog::info("learner: checkpoint {}", path);
+  return path;
+}
+
+void LearnerService::Publish(bool republish) {
+  if (!republish || weights_bytes_.empty()) {
+    proto::LearnerMessage m;
+    m.set_wire_version(proto::WIRE_VERSION_CURRENT);
+    proto::Weights* w = m.mutable_weights();
+    w->set_version(version());
+    w->set_run_id(run_id_);
+    proto::TaskPolicy* tp = w->add_policies();
+    tp->set_task(task_);
+    ppo_->ExportWeights(tp->mutable_model());
+    weights_bytes_ = m.SerializeAsString();
+  }
+  weights_sock_.send(zmq::buffer(weights_bytes_), zmq::send_flags::dontwait);
+  (republish ? stats_.weights_republished : stats_.weights_published) += 1;
+}
+
+void LearnerService::Reject(WireReject kind, const std::string& why) {
+  counters_.set_rejected(counters_.rejected() + 1);
+  stats_.rejected_by_kind[WireRejectName(kind)] += 1;
+  // Rate-limited: garbage on a socket must not flood the log either.
+  const double now = MonotonicSeconds();
+  if (now - rejects_logged_at_ >= 5.0) {
+    spdlog::warn("learner: dropped a message ({}): {}{}", WireRejectName(kind), why,
+                 rejects_unlogged_ ? " (+" + std::to_string(rejects_unlogged_) + " not logged)"
+                                   : std::string());
+    rejects_logged_at_ = now;
+    rejects_unlogged_ = 0;
+  } else {
+    ++rejects_unlogged_;
+  }
+}
+
+void LearnerService::HandleRollout(const zmq::message_t& msg) {
+  ++stats_.messages;
+  proto::ActorMessage m;
+  std::string why;
+  const WireReject r = ParseActorMessage(msg.data(), msg.size(), limits_, &m, &why);
+  if (r != WireReject::kOk) return Reject(r, why);
+  const double now = MonotonicSeconds();
+  switch (m.body_case()) {
+    case proto::ActorMessage::kHello:
+      ++stats_.hellos;
+      actor_last_seen_[m.hello().actor_instance()] = now;
+      spdlog::info("learner: actor {} ({}, {} envs of {}) joined", m.hello().actor_id(),
+                   m.hello().hostname(), m.hello().num_envs(), m.hello().env_name());
+      break;
+    case proto::ActorMessage::kHeartbeat:
+      ++stats_.heartbeats;
+      actor_last_seen_[m.heartbeat().actor_instance()] = now;
+      break;
+    case proto::ActorMessage::kEndPoses:
+      ++stats_.end_pose_batches;  // Stored by the transition fine-tuning stage (not yet used).
+      break;
+    case proto::ActorMessage::kSegment:
+      actor_last_seen_[m.segment().actor_instance()] = now;
+      if (HandleSegment(m.segment())) {
+        wire_bytes_ += msg.size();
+        wire_samples_ += m.segment().rollout().rewards_size();
+      }
+      break;
+    default:
+      break;
+  }
+}
+
+bool LearnerService::HandleSegment(const proto::Segment& seg) {
+  Rollout r;
+  try {
+    r = Rollout::FromProto(seg.rollout(), "segment");
+  } catch (const ConfigError& e) {
+    Reject(WireReject::kShape, e.what());
+    return false;
+  }
+  const uint64_t v = version();
+  // Observation statistics are valid data whatever the policy version was.
+  if (r.policy_version <= v) ppo_->AddObsStats(r.obs_stats_delta);
+  if (r.policy_version > v ||
+      v - r.policy_version > static_cast<uint64_t>(setup_.cluster.max_policy_lag)) {
+    // Too old, or from a version this learner never published (weights of a run past our last
+    // checkpoint, before a restart).
+    counters_.set_dropped_stale(counters_.dropped_stale() + 1);
+    return false;
+  }
+  for (const auto& e : seg.episodes()) {
+    batch_returns_.push_back(e.episode_return());
+    batch_lengths_.push_back(e.length());
+  }
+  counters_.set_episodes(counters_.episodes() + seg.episodes_size());
+  counters_.set_segments(counters_.segments() + 1);
+  batch_lag_sum_ += static_cast<double>(v - r.policy_version);
+  ++batch_segments_;
+  batch_samples_ += r.size();
+  batch_.push_back(std::move(r));
+  return true;
+}
+
+int LearnerService::ActorsAlive() const {
+  const double now = MonotonicSeconds();
+  int n = 0;
+  for (const auto& [id, t] : actor_last_seen_) n += now - t <= setup_.cluster.actor_timeout_s;
+  return n;
+}
+
+void LearnerService::Train() {
+  const double t0 = MonotonicSeconds();
+  UpdateStats u;
+  try {
+    u = ppo_->Update(batch_);
+  } catch (const ConfigError& e) {
+    // Every segment was validated on receipt; should PPO still refuse the batch, drop it rather
+    // than stop the run.
+    spdlog::error("learner: PPO refused a batch of {} segments, dropped: {}", batch_.size(),
+                  e.what());
+    counters_.set_rejected(counters_.rejected() + batch_.size());
+    stats_.rejected_by_kind["ppo"] += batch_.size();
+    batch_.clear();
+    batch_samples_ = 0;
+    batch_lag_sum_ = 0;
+    batch_segments_ = 0;
+    batch_returns_.clear();
+    batch_lengths_.clear();
+    return;
+  }
+  counters_.set_updates(counters_.updates() + 1);
+  counters_.set_samples(counters_.samples() + batch_samples_);
+  Publish(false);
+  const double now = MonotonicSeconds();
+  const double window = now - last_update_s_;
+  last_samples_per_s_ = window > 0 ? batch_samples_ / window : 0.0;
+  last_lag_mean_ = batch_segments_ ? batch_lag_sum_ / batch_segments_ : 0.0;
+  if (!batch_returns_.empty()) last_return_mean_ = Mean(batch_returns_);
+  WriteMetrics(u, now - t0, batch_samples_);
+  last_update_s_ = now;
+  batch_.clear();
+  batch_samples_ = 0;
+  batch_lag_sum_ = 0;
+  batch_segments_ = 0;
+  batch_returns_.clear();
+  batch_lengths_.clear();
+  if (counters_.updates() % setup_.cluster.checkpoint_every == 0) SaveCheckpoint();
+}
+
+void LearnerService::WriteMetrics(const UpdateStats& u, double update_s, uint64_t samples) {
+  Json j{
+      {"update", counters_.updates()},
+      {"samples", counters_.samples()},
+      {"batch_samples", samples},
+      {"samples_per_s", last_samples_per_s_},
+      {"update_s", update_s},
+      {"policy_lag_mean", last_lag_mean_},
+      {"episodes", batch_returns_.size()},
+      {"return_mean", batch_returns_.empty() ? Json(nullptr) : Json(Mean(batch_returns_))},
+      {"episode_length_mean", batch_lengths_.empty() ? Json(nullptr) : Json(Mean(batch_lengths_))},
+      {"dropped_stale", counters_.dropped_stale()},
+      {"rejected", counters_.rejected()},
+      {"actors", ActorsAlive()},
+      {"wire_bytes_per_sample",
+       wire_samples_ ? static_cast<double>(wire_bytes_) / wire_samples_ : 0.0},
+      {"time_s", train_time_base_s_ + MonotonicSeconds() - start_s_},
+      {"ppo", ToJson(u)}};
+  std::ofstream out(options_.run_dir + "/metrics.jsonl", std::ios::app);
+  out << j.dump() << "\n";
+  UpdateGauges();
+  static thread_local double last_console = -1e9;
+  const double now = MonotonicSeconds();
+  if (now - last_console >= options_.console_every_s) {
+    last_console = now;
+    spdlog::info(
+        "update {} | samples {} | {:.0f} samples/s | lag {:.2f} | return {} | "
+        "policy loss {:.4f} value loss {:.4f} | stale {} rejected {} | actors {}",
+        counters_.updates(), counters_.samples(), last_samples_per_s_, last_lag_mean_,
+        j["return_mean"].dump(), u.policy_loss, u.value_loss, counters_.dropped_stale(),
+        counters_.rejected(), ActorsAlive());
+  }
+}
+
+void LearnerService::UpdateGauges() {
+  if (!metrics_) return;
+  MetricsServer& m = *metrics_;
+  m.Set("perch_updates_total", counters_.updates(), "PPO updates", "counter");
+  m.Set("perch_samples_total", counters_.samples(), "env steps trained on", "counter");
+  m.Set("perch_episodes_total", counters_.episodes(), "episodes finished", "counter");
+  m.Set("perch_segments_total", counters_.segments(), "segments accepted", "counter");
+  m.Set("perch_dropped_stale_total", counters_.dropped_stale(), "segments dropped for policy lag",
+        "counter");
+  m.Set("perch_rejected_total", counters_.rejected(), "messages that failed to parse/validate",
+        "counter");
+  m.Set("perch_samples_per_second", last_samples_per_s_, "samples/s over the last update");
+  m.Set("perch_policy_lag", last_lag_mean_, "mean policy lag of the last batch, in versions");
+  m.Set("perch_return_mean", last_return_mean_, "mean episode return of the last batch");
+  m.Set("perch_actors", ActorsAlive(), "actors heard from within actor_timeout_s");
+  m.Set("perch_hellos_total", stats_.hellos, "actor hellos (process starts)", "counter");
+  m.Set("perch_heartbeats_total", stats_.heartbeats, "actor heartbeats", "counter");
+  m.Set("perch_messages_total", stats_.messages, "messages received on the rollout socket",
+        "counter");
+  m.Set("perch_weights_republished_total", stats_.weights_republished,
+        "weights resent to (re)subscribing actors", "counter");
+  m.Set("perch_weights_version", static_cast<double>(version()), "published weights version");
+}
+
+void LearnerService::Run() {
+  start_s_ = MonotonicSeconds();
+  last_update_s_ = start_s_;
+  Publish(false);
+  UpdateGauges();
+  zmq::pollitem_t items[] = {{rollout_sock_.handle(), 0, ZMQ_POLLIN, 0},
+                             {weights_sock_.handle(), 0, ZMQ_POLLIN, 0}};
+  double last_gauges = start_s_;
+  const auto stopping = [&] { return options_.stop && options_.stop->load(); };
+  while (!stopping()) {
+    if (options_.max_updates > 0 &&
+        counters_.updates() >= static_cast<uint64_t>(options_.max_updates)) {
+      break;
+    }
+    zmq::poll(items, 2, std::chrono::milliseconds(100));
+    if (items[1].revents & ZMQ_POLLIN) {
+      zmq::message_t sub;
+      bool any_subscribe = false;
+      while (weights_sock_.recv(sub, zmq::recv_flags::dontwait)) {
+        any_subscribe |= sub.size() > 0 && static_cast<const char*>(sub.data())[0] == 1;
+      }
+      // A late joiner or a reconnecting actor gets the current weights now, not at the next update.
+      if (any_subscribe) Publish(true);
+    }
+    if (items[0].revents & ZMQ_POLLIN) {
+      zmq::message_t msg;
+      // Drain what is queued, but train as soon as a batch is full.
+      while (batch_samples_ < static_cast<uint64_t>(setup_.ppo.steps_per_update) &&
+             rollout_sock_.recv(msg, zmq::recv_flags::dontwait)) {
+        HandleRollout(msg);
+      }
+    }
+    if (batch_samples_ >= static_cast<uint64_t>(setup_.ppo.steps_per_update)) Train();
+    const double now = MonotonicSeconds();
+    if (now - last_gauges >= 1.0) {
+      UpdateGauges();
+      last_gauges = now;
+    }
+  }
+  if (static_cast<int64_t>(counters_.updates()) != last_checkpoint_update_) SaveCheckpoint();
+  UpdateGauges();
+  spdlog::info("learner: stopped at update {} ({} samples, {} stale, {} rejected)",
+               counters_.updates(), counters_.samples(), counters_.dropped_stale(),
+               counters_.rejected());
+}
+
+}  // namespace perch

@@ -1,0 +1,128 @@
+// The learner role: binds the rollout (PULL) and weights (XPUB) sockets, validates incoming
+// segments, drops stale ones, runs PPO when a batch is full, publishes versioned weights, reports
+// progress (console, <run_dir>/metrics.jsonl, Prometheus /metrics) and writes checkpoints.
+// The same class runs in the `perch learner` process (tcp://) and inside tests (inproc://).
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+#include <zmq.hpp>
+
+#include "common/json_util.h"
+#include "common/proto/wire.pb.h"
+#include "common/rng.h"
+#include "learner/policy.h"
+#include "learner/ppo.h"
+#include "learner/rollout.h"
+#include "learner/service/checkpoint.h"
+#include "learner/service/cluster_config.h"
+#include "learner/service/metrics_http.h"
+#include "learner/service/wire.h"
+
+namespace perch {
+
+// Everything the learner needs from the experiment config, resolved by the caller.
+struct LearnerSetup {
+  uint64_t seed = 0;
+  PolicyConfig policy;  // dims resolved from the env spec
+  PpoConfig ppo;
+  ClusterConfig cluster;
+  Json resolved_config;    // the whole experiment config, saved into the run dir and checkpoints
+  std::string compat_key;  // must match a checkpoint to resume from it
+};
+
+struct LearnerOptions {
+  std::string rollout_bind = "tcp://*:5555";
+  std::string weights_bind = "tcp://*:5556";
+  int metrics_port = 9100;  // -1: no /metrics endpoint; 0: any free port
+  std::string run_dir;
+  bool resume = false;
+  int64_t max_updates = 0;  // stop after this many updates in total (0: never)
+  double console_every_s = 5.0;
+  const std::atomic<bool>* stop = nullptr;  // set by a signal handler or a test
+};
+
+// Counts of what arrived, for metrics and tests.
+struct LearnerStats {
+  uint64_t messages = 0;
+  uint64_t hellos = 0;
+  uint64_t heartbeats = 0;
+  uint64_t end_pose_batches = 0;
+  uint64_t weights_published = 0;
+  uint64_t weights_republished = 0;                  // to late joiners / reconnecting actors
+  std::map<std::string, uint64_t> rejected_by_kind;  // WireRejectName -> count
+};
+
+class LearnerService {
+ public:
+  // Loads the checkpoint when options.resume (throws CheckpointError when checkpoints exist but
+  // none is usable) and binds the sockets (throws zmq::error_t / std::runtime_error).
+  LearnerService(zmq::context_t& ctx, const LearnerSetup& setup, const LearnerOptions& options);
+  ~LearnerService();
+
+  // Runs until options.stop is set or max_updates is reached, then writes a final checkpoint.
+  void Run();
+
+  const proto::Counters& counters() const { return counters_; }
+  const LearnerStats& stats() const { return stats_; }
+  uint64_t version() const { return static_cast<uint64_t>(ppo_->num_updates()); }
+  int metrics_port() const { return metrics_ ? metrics_->port() : -1; }
+  const std::string& resumed_from() const { return resumed_from_; }
+  std::string SaveCheckpoint();  // returns its path
+
+ private:
+  void HandleRollout(const zmq::message_t& msg);
+  bool HandleSegment(const proto::Segment& seg);  // true when accepted
+  void Reject(WireReject kind, const std::string& why);
+  void Publish(bool republish);
+  void Train();
+  void WriteMetrics(const UpdateStats& u, double dt_s, uint64_t batch_samples);
+  void UpdateGauges();
+  int ActorsAlive() const;
+  void Resume();
+
+  LearnerSetup setup_;
+  LearnerOptions options_;
+  proto::Task task_;
+  WireLimits limits_;
+  std::unique_ptr<PpoLearner> ppo_;
+  CheckpointStore store_;
+  Rng rng_;
+  uint64_t run_id_ = 0;
+  proto::Counters counters_;
+  LearnerStats stats_;
+  std::string resumed_from_;
+
+  zmq::socket_t rollout_sock_;
+  zmq::socket_t weights_sock_;
+  std::unique_ptr<MetricsServer> metrics_;
+  std::string weights_bytes_;  // the last published LearnerMessage, for late joiners
+
+  std::vector<Rollout> batch_;
+  uint64_t batch_samples_ = 0;
+  double batch_lag_sum_ = 0.0;  // sum over accepted segments of (version - segment version)
+  uint64_t batch_segments_ = 0;
+  std::vector<double> batch_returns_;
+  std::vector<double> batch_lengths_;
+  uint64_t wire_samples_ = 0;  // samples in those messages, since this process started
+  uint64_t wire_bytes_ = 0;    // bytes of accepted segment messages (wire_bytes_per_sample)
+  std::map<uint64_t, double> actor_last_seen_;  // actor_instance -> monotonic seconds
+  double last_return_mean_ = 0.0;
+  double last_samples_per_s_ = 0.0;
+  double last_lag_mean_ = 0.0;
+  double rejects_logged_at_ = -1e9;
+  uint64_t rejects_unlogged_ = 0;
+  double start_s_ = 0.0;
+  double last_update_s_ = 0.0;
+  double train_time_base_s_ = 0.0;
+  int64_t last_checkpoint_update_ = -1;
+};
+
+// Seconds on the monotonic clock.
+double MonotonicSeconds();
+
+}  // namespace perch

@@ -1,0 +1,161 @@
+#include "learner/service/wire.h"
+
+#include <cmath>
+
+namespace perch {
+namespace {
+
+template <typename R>
+bool AllFinite(const R& r) {
+  for (float v : r) {
+    if (!std::isfinite(v)) return false;
+  }
+  return true;
+}
+
+WireReject Shape(std::string* why, const std::string& msg) {
+  *why = msg;
+  return WireReject::kShape;
+}
+
+std::string Got(const char* field, int got, int64_t want) {
+  return std::string(field) + " has " + std::to_string(got) + " values, expected " +
+         std::to_string(want);
+}
+
+}  // namespace
+
+const char* WireRejectName(WireReject r) {
+  switch (r) {
+    case WireReject::kOk:
+      return "ok";
+    case WireReject::kTooBig:
+      return "too_big";
+    case WireReject::kParse:
+      return "parse";
+    case WireReject::kVersion:
+      return "version";
+    case WireReject::kEmpty:
+      return "empty";
+    case WireReject::kShape:
+      return "shape";
+    case WireReject::kNonFinite:
+      return "non_finite";
+  }
+  return "?";
+}
+
+WireReject ValidateSegment(const proto::Segment& seg, const WireLimits& lim, std::string* why) {
+  const proto::RolloutSegment& s = seg.rollout();
+  const int64_t t = s.rewards_size();
+  if (t < 1 || t > lim.max_segment_steps) {
+    return Shape(why, "segment of " + std::to_string(t) + " steps, outside 1.." +
+                          std::to_string(lim.max_segment_steps));
+  }
+  if (s.obs_dim() < 1 || s.action_size() < 1) return Shape(why, "obs_dim/action_size must be >= 1");
+  if (lim.obs_dim > 0 && s.obs_dim() != lim.obs_dim) {
+    return Shape(why, "obs_dim " + std::to_string(s.obs_dim()) + ", learner expects " +
+                          std::to_string(lim.obs_dim));
+  }
+  if (lim.act_dim > 0 && s.action_size() != lim.act_dim) {
+    return Shape(why, "action_size " + std::to_string(s.action_size()) + ", learner expects " +
+                          std::to_string(lim.act_dim));
+  }
+  if (s.obs_size() != t * s.obs_dim()) return Shape(why, Got("obs", s.obs_size(), t * s.obs_dim()));
+  if (s.actions_size() != t * s.action_size()) {
+    return Shape(why, Got("actions", s.actions_size(), t * s.action_size()));
+  }
+  if (s.log_probs_size() != t) return Shape(why, Got("log_probs", s.log_probs_size(), t));
+  if (s.values_size() != t) return Shape(why, Got("values", s.values_size(), t));
+  if (static_cast<int64_t>(s.terminated().size()) != t) {
+    return Shape(why, Got("terminated", static_cast<int>(s.terminated().size()), t));
+  }
+  if (static_cast<int64_t>(s.truncated().size()) != t) {
+    return Shape(why, Got("truncated", static_cast<int>(s.truncated().size()), t));
+  }
+  if (s.bootstrap_values_size() != t) {
+    return Shape(why, Got("bootstrap_values", s.bootstrap_values_size(), t));
+  }
+  if (seg.policy_versions_size() < 1) return Shape(why, "policy_versions is empty");
+  const auto& m = s.obs_stats_delta();
+  if (m.count() > 0 && (m.mean_size() != s.obs_dim() || m.var_size() != s.obs_dim())) {
+    return Shape(why, "obs_stats_delta mean/var must have obs_dim values");
+  }
+  if (!AllFinite(s.obs()) || !AllFinite(s.actions()) || !AllFinite(s.log_probs()) ||
+      !AllFinite(s.values()) || !AllFinite(s.rewards()) || !AllFinite(s.bootstrap_values()) ||
+      !std::isfinite(seg.bootstrap_value())) {
+    *why = "NaN or Inf in a segment array";
+    return WireReject::kNonFinite;
+  }
+  if (!std::isfinite(m.count()) || m.count() < 0) {
+    return *why = "bad obs_stats_delta.count", WireReject::kNonFinite;
+  }
+  for (double v : m.mean()) {
+    if (!std::isfinite(v)) return *why = "NaN in obs_stats_delta", WireReject::kNonFinite;
+  }
+  for (double v : m.var()) {
+    if (!std::isfinite(v) || v < 0) return *why = "bad obs_stats_delta.var", WireReject::kNonFinite;
+  }
+  return WireReject::kOk;
+}
+
+WireReject ParseActorMessage(const void* data, size_t size, const WireLimits& lim,
+                             proto::ActorMessage* out, std::string* why) {
+  if (size > lim.max_message_bytes) {
+    *why = std::to_string(size) + " bytes exceeds max_message_bytes " +
+           std::to_string(lim.max_message_bytes);
+    return WireReject::kTooBig;
+  }
+  if (!out->ParseFromArray(data, static_cast<int>(size))) {
+    *why = "does not parse as perch.proto.ActorMessage";
+    return WireReject::kParse;
+  }
+  if (out->wire_version() != proto::WIRE_VERSION_CURRENT) {
+    *why = "wire_version " + std::to_string(out->wire_version()) + ", expected " +
+           std::to_string(proto::WIRE_VERSION_CURRENT);
+    return WireReject::kVersion;
+  }
+  switch (out->body_case()) {
+    case proto::ActorMessage::kSegment:
+      return ValidateSegment(out->segment(), lim, why);
+    case proto::ActorMessage::kEndPoses: {
+      const auto& p = out->end_poses();
+      if (p.pose_dim() < 1 || static_cast<int>(p.pose_dim()) > lim.max_pose_dim ||
+          p.poses_size() % p.pose_dim() != 0) {
+        return Shape(why, "end_poses: pose_dim " + std::to_string(p.pose_dim()) +
+                              " does not divide " + std::to_string(p.poses_size()) + " values");
+      }
+      if (!AllFinite(p.poses())) return *why = "NaN in end_poses", WireReject::kNonFinite;
+      return WireReject::kOk;
+    }
+    case proto::ActorMessage::kHello:
+    case proto::ActorMessage::kHeartbeat:
+      return WireReject::kOk;
+    default:
+      *why = "message has no body";
+      return WireReject::kEmpty;
+  }
+}
+
+WireReject ParseLearnerMessage(const void* data, size_t size, size_t max_bytes,
+                               proto::LearnerMessage* out, std::string* why) {
+  if (size > max_bytes) {
+    *why = std::to_string(size) + " bytes exceeds the limit " + std::to_string(max_bytes);
+    return WireReject::kTooBig;
+  }
+  if (!out->ParseFromArray(data, static_cast<int>(size))) {
+    *why = "does not parse as perch.proto.LearnerMessage";
+    return WireReject::kParse;
+  }
+  if (out->wire_version() != proto::WIRE_VERSION_CURRENT) {
+    *why = "wire_version " + std::to_string(out->wire_version());
+    return WireReject::kVersion;
+  }
+  if (out->body_case() != proto::LearnerMessage::kWeights) {
+    *why = "message has no body";
+    return WireReject::kEmpty;
+  }
+  return WireReject::kOk;
+}
+
+}  // namespace perch

@@ -1,0 +1,36 @@
+// Receiving side of the wire schema (common/proto/wire.proto): size limits, parsing and shape
+// checks. Nothing here throws on bad input: a message is either accepted or rejected with a reason
+// that the learner counts and logs (rate-limited).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include "common/proto/wire.pb.h"
+
+namespace perch {
+
+struct WireLimits {
+  size_t max_message_bytes = 64 << 20;
+  int max_segment_steps = 8192;
+  int obs_dim = 0;  // expected; 0 accepts any
+  int act_dim = 0;  // action_size
+  int max_pose_dim = 4096;
+};
+
+// Why a message was rejected; kOk when accepted. Counted per kind in the learner's metrics.
+enum class WireReject { kOk, kTooBig, kParse, kVersion, kEmpty, kShape, kNonFinite };
+const char* WireRejectName(WireReject r);
+
+// Parses and validates an actor -> learner message.
+WireReject ParseActorMessage(const void* data, size_t size, const WireLimits& limits,
+                             proto::ActorMessage* out, std::string* why);
+// Shape and finiteness checks of one segment (called by ParseActorMessage).
+WireReject ValidateSegment(const proto::Segment& s, const WireLimits& limits, std::string* why);
+
+// Parses a learner -> actor message (the actor's side of the same checks).
+WireReject ParseLearnerMessage(const void* data, size_t size, size_t max_bytes,
+                               proto::LearnerMessage* out, std::string* why);
+
+}  // namespace perch

@@ -1,0 +1,59 @@
+#include "learner/service/cluster_config.h"
+
+#include <gtest/gtest.h>
+
+#include <string>
+
+namespace perch {
+namespace {
+
+std::string ErrorOf(const Json& j) {
+  try {
+    ClusterConfigFromJson(j, "f.json:cluster");
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(ClusterConfigTest, DefaultsRoundTrip) {
+  const ClusterConfig d;
+  const ClusterConfig back = ClusterConfigFromJson(ToJson(d), "x");
+  EXPECT_EQ(ToJson(back), ToJson(d));
+  EXPECT_EQ(d.checkpoint_every, 100);      // the authors' checkpoint period (notes §8.1)
+  EXPECT_EQ(d.hierarchy_meta_period, 30);  // notes §4.7
+}
+
+TEST(ClusterConfigTest, ErrorsNameFileAndField) {
+  EXPECT_NE(ErrorOf({{"segmant_steps", 3}}).find("f.json:cluster: unknown field 'segmant_steps'"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf({{"segment_steps", "many"}}).find("f.json:cluster.segment_steps"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf({{"segment_steps", 0}}).find("segment_steps"), std::string::npos);
+  EXPECT_NE(ErrorOf({{"task", "dance"}}).find("unknown task 'dance'"), std::string::npos);
+  EXPECT_NE(ErrorOf({{"segment_steps", 100}, {"max_segment_steps", 50}}).find("exceeds"),
+            std::string::npos);
+  EXPECT_EQ(ErrorOf({{"segment_steps", 64}, {"task", "sit"}}), "");
+}
+
+TEST(ClusterConfigTest, TaskNamesRoundTrip) {
+  for (const char* n : {"walk", "left_turn", "right_turn", "sit", "meta", "stand"}) {
+    EXPECT_EQ(TaskName(TaskFromName(n, "t")), n);
+  }
+}
+
+TEST(ClusterConfigTest, Endpoints) {
+  for (const char* ok : {"tcp://*:5555", "tcp://127.0.0.1:1", "tcp://perch-learner:5556",
+                         "inproc://weights", "ipc:///tmp/x"}) {
+    EXPECT_NO_THROW(CheckEndpoint(ok, "--x")) << ok;
+  }
+  for (const char* bad : {"", "tcp://", "tcp://host", "tcp://:5555", "tcp://h:0", "tcp://h:70000",
+                          "tcp://h:55x", "udp://h:1", "inproc://"}) {
+    EXPECT_THROW(CheckEndpoint(bad, "--x"), ConfigError) << bad;
+  }
+  EXPECT_THROW(CheckPort(0, "--p"), ConfigError);
+  EXPECT_NO_THROW(CheckPort(65535, "--p"));
+}
+
+}  // namespace
+}  // namespace perch
