@@ -52,7 +52,9 @@ struct InitConfig {
 };
 
 struct SafetyConfig {
-  double max_joint_speed = 60.0;      // [rad/s]; beyond: invalid episode
+  // Above Bullet's joint-speed clamp (physics.max_joint_speed, 100 rad/s): light links (feet,
+  // hands) reach the clamp under random full torques without anything blowing up.
+  double max_joint_speed = 150.0;     // [rad/s]; beyond: invalid episode
   double max_root_speed = 10.0;       // [m/s] (falling from 1.3 m: 5 m/s)
   double max_root_ang_speed = 60.0;   // [rad/s]
   double max_abs_position = 1000.0;   // [m]

@@ -55,7 +55,7 @@ PhysicsConfig PhysicsConfig::FromJson(const Json& j, const std::string& ctx) {
   CheckKnownKeys(j,
                  {"physics_dt", "substeps", "gravity", "solver_iterations", "contact_erp",
                   "floor_friction", "humanoid_friction", "chair_friction", "linear_damping",
-                  "angular_damping", "contact_distance", "limit_margin"},
+                  "angular_damping", "max_joint_speed", "contact_distance", "limit_margin"},
                  ctx);
   PhysicsConfig c;
   GetOptional(j, "physics_dt", c.physics_dt, ctx);
@@ -69,6 +69,8 @@ PhysicsConfig PhysicsConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "linear_damping", c.linear_damping, ctx);
   GetOptional(j, "angular_damping", c.angular_damping, ctx);
   GetOptional(j, "contact_distance", c.contact_distance, ctx);
+  GetOptional(j, "max_joint_speed", c.max_joint_speed, ctx);
+  if (!(c.max_joint_speed > 0.0)) throw ConfigError(ctx + ".max_joint_speed: must be > 0");
   GetOptional(j, "limit_margin", c.limit_margin, ctx);
   if (!(c.limit_margin >= 0.0)) throw ConfigError(ctx + ".limit_margin: must be >= 0");
   if (!(c.physics_dt > 0.0 && c.physics_dt < 0.1)) throw ConfigError(ctx + ".physics_dt: must be in (0, 0.1) s");
@@ -93,6 +95,7 @@ Json PhysicsConfig::ToJson() const {
               {"linear_damping", linear_damping},
               {"angular_damping", angular_damping},
               {"contact_distance", contact_distance},
+              {"max_joint_speed", max_joint_speed},
               {"limit_margin", limit_margin}};
 }
 
@@ -286,6 +289,7 @@ void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
   mb->setHasSelfCollision(true);
   mb->setLinearDamping(config_.linear_damping);
   mb->setAngularDamping(config_.angular_damping);
+  mb->setMaxCoordinateVelocity(config_.max_joint_speed);
   mb->setCanSleep(false);
 
   // Pose and velocities. Bullet's base is the torso's inertial frame.

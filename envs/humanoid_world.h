@@ -35,6 +35,8 @@ struct PhysicsConfig {
   double chair_friction = 0.5;     // Bullet's URDF default
   double linear_damping = 0.04;    // btMultiBody defaults, as in the authors' sim [1/s]
   double angular_damping = 0.04;
+  // Bullet clamps every joint speed to this [rad/s] (btMultiBody's default, as in the authors' sim).
+  double max_joint_speed = 100.0;
   // A manifold point counts as contact when its signed distance is below this [m].
   double contact_distance = 0.02;
   // A joint's limit constraint is active only within limit_margin + 2 |qdot| dt of a limit [rad].

@@ -328,6 +328,32 @@ TEST(HumanoidEnv, ExplodingStateIsFlaggedInvalidAndEnvRecovers) {
   EXPECT_FALSE(ok.invalid);
 }
 
+// An untrained policy's actions (N(0, 1), clipped by the env) drive the light feet and hands to
+// Bullet's joint-speed clamp; that is not a blow-up and must not end most episodes as invalid
+// (a 60 rad/s threshold ended every one of them after about two steps).
+TEST(HumanoidEnv, RandomActionsDoNotMostlyEndInvalid) {
+  EnvConfig c = PdConfig();
+  HumanoidChairEnv env(c);
+  env.Seed(5);
+  std::vector<float> obs(env.spec().obs_dim), act(21);
+  Rng rng(11);
+  int episodes = 0, invalid = 0, steps = 0;
+  env.Reset(obs.data());
+  while (steps < 1500) {
+    for (float& a : act) a = static_cast<float>(rng.Normal());
+    const StepResult r = env.Step(act.data(), obs.data());
+    ++steps;
+    if (r.terminated || r.truncated) {
+      ++episodes;
+      invalid += r.invalid;
+      env.Reset(obs.data());
+    }
+  }
+  ASSERT_GT(episodes, 10);
+  EXPECT_GT(static_cast<double>(steps) / episodes, 8.0);  // the humanoid takes time to fall
+  EXPECT_LT(static_cast<double>(invalid) / episodes, 0.3);
+}
+
 TEST(HumanoidEnv, StandTaskTerminatesOnFallAndTruncatesAtLimit) {
   EnvConfig c;  // torque mode, zero torques: the humanoid collapses
   c.stand.max_episode_steps = 400;
