@@ -12,5 +12,6 @@ void RegisterMotionCommands(CLI::App& root, CLI::App& bench);   // app/cmd_motio
 void RegisterLearnerCommands(CLI::App& root, CLI::App& bench);  // app/cmd_ppo.cc
 void RegisterClusterCommands(CLI::App& root, CLI::App& bench);  // app/cmd_cluster.cc
 void RegisterVizCommands(CLI::App& root, CLI::App& bench);      // app/cmd_viz.cc
+void RegisterEvalCommands(CLI::App& root, CLI::App& bench);     // app/cmd_eval.cc
 
 }  // namespace perch

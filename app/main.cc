@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
   perch::RegisterLearnerCommands(app, *bench);
   perch::RegisterClusterCommands(app, *bench);
   perch::RegisterVizCommands(app, *bench);
+  perch::RegisterEvalCommands(app, *bench);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -117,7 +117,10 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
   }
   GetOptional(j, "seat_contact_max_pelvis_z", c.seat_contact_max_pelvis_z, ctx);
   GetOptional(j, "task", c.task, ctx);
-  if (c.task != "stand") throw ConfigError(ctx + ".task: unknown task \"" + c.task + "\" (known: stand)");
+  // "walk" is built by tasks/ (MakeTaskEnv); the env only needs to know the name.
+  if (c.task != "stand" && c.task != "walk") {
+    throw ConfigError(ctx + ".task: unknown task \"" + c.task + "\" (known: stand, walk)");
+  }
   if (j.contains("stand")) {
     const Json& s = j["stand"];
     const std::string sc = ctx + ".stand";

@@ -67,6 +67,10 @@ class StandTask : public Task {
 
 std::unique_ptr<Task> MakeTask(const EnvConfig& config) {
   if (config.task == "stand") return std::make_unique<StandTask>(config.stand);
+  if (config.task == "walk") {
+    throw ConfigError(
+        "task: \"walk\" lives in tasks/; build the env with MakeTaskEnv (tasks/task_env.h)");
+  }
   throw ConfigError("task: unknown task \"" + config.task + "\"");
 }
 
@@ -127,12 +131,14 @@ HumanoidState SeatedPose(const HumanoidModel& model, const Chair& chair,
 
 // ---- env -------------------------------------------------------------------------------------
 
-HumanoidChairEnv::HumanoidChairEnv(const EnvConfig& config)
+HumanoidChairEnv::HumanoidChairEnv(const EnvConfig& config) : HumanoidChairEnv(config, nullptr) {}
+
+HumanoidChairEnv::HumanoidChairEnv(const EnvConfig& config, std::unique_ptr<Task> task)
     : config_(config), model_(HumanoidModel::Load(config.HumanoidPath())) {
   const std::string chair_path = config_.ChairPath();
   if (!chair_path.empty()) chair_ = std::make_unique<Chair>(Chair::Load(chair_path));
   world_ = std::make_unique<World>(model_, chair_.get(), config_.chair_placement, config_.physics);
-  task_ = MakeTask(config_);
+  task_ = task ? std::move(task) : MakeTask(config_);
   init_pose_ = LoadInitPose(config_, model_);
   body_pos_.resize(model_.num_bodies());
   pd_ = std::make_unique<PdController>(model_, config_.physics.physics_dt, config_.pd_implicit);
@@ -157,6 +163,11 @@ void HumanoidChairEnv::BuildSpec() {
 }
 
 void HumanoidChairEnv::Reset(float* obs) {
+  HumanoidState chosen;
+  if (task_->InitialState(*this, rng_, &chosen)) {
+    ResetToState(chosen, obs);
+    return;
+  }
   const SpawnPose spawn = SampleSpawn(config_.spawn, rng_);
   ResetToState(PlaceAtSpawn(init_pose_, spawn, config_.chair_placement), obs);
 }
@@ -235,6 +246,7 @@ StepResult HumanoidChairEnv::Step(const float* action, float* obs) {
     WriteObs(obs);
     return r;
   }
+  task_->BeforeObservation(*this, rng_);
   WriteObs(obs);  // builds with the previous step's foot flags when lagged
   const TaskStep t = task_->OnStep(*this, action);
   r.reward = t.reward;

@@ -19,7 +19,8 @@ namespace perch {
 
 class HumanoidChairEnv;
 
-// Task hook: later issues add walk / turn / sit / meta tasks as further subclasses.
+// Task hook: tasks/ adds walk (and later turn / sit / meta) as further subclasses. A task's own
+// memory (reference phase, previous distances) is not part of EnvState.
 struct TaskStep {
   float reward = 0.0f;
   bool terminated = false;  // e.g. fell
@@ -30,8 +31,16 @@ class Task {
   virtual ~Task() = default;
   virtual const char* name() const = 0;
   virtual int max_episode_steps() const = 0;
+  // Chooses the episode's initial state (world frame), e.g. a reference frame (reference state
+  // initialisation); returning false keeps the env's spawn (config.spawn, config.init).
+  virtual bool InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) {
+    return false;
+  }
   // After the initial state is in place, before the first observation (may set the walk target).
   virtual void OnReset(HumanoidChairEnv& env, Rng& rng) {}
+  // After the physics of each step, before its observation is written (notes 4.6: the walk
+  // target is re-drawn there). Not called on an invalid step.
+  virtual void BeforeObservation(HumanoidChairEnv& env, Rng& rng) {}
   // After the physics of one control step; `action` is the raw (unclipped) policy action.
   virtual TaskStep OnStep(const HumanoidChairEnv& env, const float* action) = 0;
 };
@@ -51,6 +60,8 @@ class HumanoidChairEnv : public Env {
   static constexpr int kProprioDim = 50;
 
   explicit HumanoidChairEnv(const EnvConfig& config);
+  // With a task built elsewhere (tasks/ MakeTaskEnv); null: MakeTask(config).
+  HumanoidChairEnv(const EnvConfig& config, std::unique_ptr<Task> task);
   ~HumanoidChairEnv() override;
 
   const EnvSpec& spec() const override { return spec_; }
@@ -68,6 +79,7 @@ class HumanoidChairEnv : public Env {
 
   // Queries for tasks, metrics and tests (valid after Reset / Step).
   const HumanoidModel& model() const { return model_; }
+  const Task& task() const { return *task_; }
   const EnvConfig& config() const { return config_; }
   const World& world() const { return *world_; }
   const HumanoidState& humanoid_state() const { return state_; }

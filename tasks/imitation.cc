@@ -5,7 +5,12 @@
 namespace perch {
 
 SimilarityRewardConfig SimilarityRewardConfig::FromJson(const Json& j, const std::string& ctx) {
-  SimilarityRewardConfig c;
+  return FromJson(j, ctx, SimilarityRewardConfig());
+}
+
+SimilarityRewardConfig SimilarityRewardConfig::FromJson(const Json& j, const std::string& ctx,
+                                                        const SimilarityRewardConfig& base) {
+  SimilarityRewardConfig c = base;
   CheckKnownKeys(j, {"w_pose", "w_vel", "alpha_pose", "alpha_vel", "finite_difference_velocities"},
                  ctx);
   GetOptional(j, "w_pose", c.w_pose, ctx);

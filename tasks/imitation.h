@@ -20,6 +20,9 @@ struct SimilarityRewardConfig {
   bool finite_difference_velocities = false;
 
   static SimilarityRewardConfig FromJson(const Json& j, const std::string& ctx);
+  // Fields absent from j keep base's values (a preset).
+  static SimilarityRewardConfig FromJson(const Json& j, const std::string& ctx,
+                                         const SimilarityRewardConfig& base);
   Json ToJson() const;
 };
 

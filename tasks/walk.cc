@@ -1,0 +1,235 @@
+#include "tasks/walk.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "common/paths.h"
+
+namespace perch {
+
+// ---- config ----------------------------------------------------------------------------------
+
+void WalkTaskConfig::ApplyVariant(const std::string& variant, const std::string& ctx) {
+  // Terms both variants share (Eq. 2-3 weights, alpha_pose, the Eq. 5 slope).
+  similarity.w_pose = 0.5;
+  similarity.w_vel = 0.05;
+  similarity.alpha_pose = 1.0;
+  target_k = 10.0;
+  if (variant == "paper") {
+    similarity.alpha_vel = 10.0;
+    similarity.finite_difference_velocities = false;
+    root_vel_weight = 0.5;
+    root_vel_alpha = 10.0;
+    target_weight = 0.1;
+  } else if (variant == "authors") {  // notes 3.2-3.3, walk clip 08_01
+    similarity.alpha_vel = 0.01;
+    similarity.finite_difference_velocities = true;
+    root_vel_weight = 0.1;
+    root_vel_alpha = 1.0;
+    target_weight = 0.5;
+  } else {
+    throw ConfigError(ctx + ".reward_variant: expected \"paper\" or \"authors\", got \"" + variant +
+                      "\"");
+  }
+  reward_variant = variant;
+}
+
+WalkTaskConfig WalkTaskConfig::FromJson(const Json& j, const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
+  CheckKnownKeys(j,
+                 {"reward_variant", "motion_file", "stage", "similarity", "root_vel_weight",
+                  "root_vel_alpha", "target_weight", "target_k", "min_root_z", "max_episode_steps",
+                  "reference_state_init", "target_redraw_s", "target_reach_m", "target_min_dist_m",
+                  "target_max_dist_m", "target_max_angle_deg", "forward_target"},
+                 ctx);
+  WalkTaskConfig c;
+  std::string variant = c.reward_variant;
+  GetOptional(j, "reward_variant", variant, ctx);
+  c.ApplyVariant(variant, ctx);
+  GetOptional(j, "motion_file", c.motion_file, ctx);
+  std::string stage = "forward";
+  GetOptional(j, "stage", stage, ctx);
+  if (stage == "forward") {
+    c.stage = WalkStage::kForward;
+  } else if (stage == "target") {
+    c.stage = WalkStage::kTarget;
+  } else {
+    throw ConfigError(ctx + ".stage: expected \"forward\" or \"target\", got \"" + stage + "\"");
+  }
+  if (j.contains("similarity")) {
+    c.similarity =
+        SimilarityRewardConfig::FromJson(j["similarity"], ctx + ".similarity", c.similarity);
+  }
+  GetOptional(j, "root_vel_weight", c.root_vel_weight, ctx);
+  GetOptional(j, "root_vel_alpha", c.root_vel_alpha, ctx);
+  GetOptional(j, "target_weight", c.target_weight, ctx);
+  GetOptional(j, "target_k", c.target_k, ctx);
+  GetOptional(j, "min_root_z", c.min_root_z, ctx);
+  GetOptional(j, "max_episode_steps", c.max_episode_steps, ctx);
+  GetOptional(j, "reference_state_init", c.reference_state_init, ctx);
+  GetOptional(j, "target_redraw_s", c.target_redraw_s, ctx);
+  GetOptional(j, "target_reach_m", c.target_reach_m, ctx);
+  GetOptional(j, "target_min_dist_m", c.target_min_dist_m, ctx);
+  GetOptional(j, "target_max_dist_m", c.target_max_dist_m, ctx);
+  GetOptional(j, "target_max_angle_deg", c.target_max_angle_deg, ctx);
+  GetOptional(j, "forward_target", c.forward_target, ctx);
+  if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
+  if (!(c.target_redraw_s > 0)) throw ConfigError(ctx + ".target_redraw_s: must be > 0");
+  if (!(c.target_min_dist_m > 0) || c.target_max_dist_m < c.target_min_dist_m) {
+    throw ConfigError(ctx + ".target_min_dist_m/target_max_dist_m: need 0 < min <= max");
+  }
+  return c;
+}
+
+Json WalkTaskConfig::ToJson() const {
+  return Json{{"reward_variant", reward_variant},
+              {"motion_file", motion_file},
+              {"stage", stage == WalkStage::kForward ? "forward" : "target"},
+              {"similarity", similarity.ToJson()},
+              {"root_vel_weight", root_vel_weight},
+              {"root_vel_alpha", root_vel_alpha},
+              {"target_weight", target_weight},
+              {"target_k", target_k},
+              {"min_root_z", min_root_z},
+              {"max_episode_steps", max_episode_steps},
+              {"reference_state_init", reference_state_init},
+              {"target_redraw_s", target_redraw_s},
+              {"target_reach_m", target_reach_m},
+              {"target_min_dist_m", target_min_dist_m},
+              {"target_max_dist_m", target_max_dist_m},
+              {"target_max_angle_deg", target_max_angle_deg},
+              {"forward_target", forward_target}};
+}
+
+std::string WalkTaskConfig::MotionPath() const { return ResolveProjectPath(motion_file); }
+
+// ---- task ------------------------------------------------------------------------------------
+
+WalkTask::WalkTask(const WalkTaskConfig& config, double control_dt)
+    : c_(config), dt_(control_dt), motion_(ReferenceMotion::Load(config.MotionPath())) {
+  if (motion_.num_frames() < 2 || motion_.frame(0).q.size() != HumanoidModel::kNumJoints) {
+    throw ConfigError(c_.MotionPath() + ": a walk reference needs >= 2 frames of " +
+                      std::to_string(HumanoidModel::kNumJoints) + " joint angles");
+  }
+  redraw_steps_ = std::max(1, static_cast<int>(std::lround(c_.target_redraw_s / dt_)));
+}
+
+MotionPose WalkTask::ReferenceAt(int step) const {
+  MotionPose p = motion_.At(t0_ + step * dt_);
+  p.root_pos += offset_;
+  return p;
+}
+
+HumanoidState WalkTask::ReferenceState(int step) const {
+  const MotionPose p = ReferenceAt(step);
+  HumanoidState s;
+  s.root_pos = p.root_pos;
+  s.root_quat = p.root_rot;
+  s.root_lin_vel = p.root_vel;
+  s.root_ang_vel = p.root_angvel;
+  for (int j = 0; j < HumanoidModel::kNumJoints; ++j) {
+    s.q[j] = p.q[j];
+    s.qd[j] = p.qdot[j];
+  }
+  return s;
+}
+
+bool WalkTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) {
+  t0_ = c_.reference_state_init ? rng.Uniform(0.0, motion_.duration()) : 0.0;
+  const MotionPose start = motion_.At(t0_);
+  // Root over the origin; the clip already faces +x (docs/motion.md), so no rotation.
+  offset_ = Eigen::Vector3d(-start.root_pos.x(), -start.root_pos.y(), 0.0);
+  *s = ReferenceState(0);
+  return true;
+}
+
+double WalkTask::TargetDistance(const HumanoidChairEnv& env) {
+  return (env.walk_target() - env.BodyXyz().head<2>()).norm();
+}
+
+void WalkTask::DrawTarget(HumanoidChairEnv& env, Rng& rng) {
+  // Authors: heading = the torso's x axis projected on the ground (length cos(pitch), kept).
+  const HumanoidState& s = env.humanoid_state();
+  const Eigen::Vector2d heading = (s.root_quat * Eigen::Vector3d::UnitX()).head<2>();
+  const double max_theta = c_.target_max_angle_deg * M_PI / 180.0;
+  const double theta = rng.Uniform(-max_theta, max_theta);
+  const double dist = rng.Uniform(c_.target_min_dist_m, c_.target_max_dist_m);
+  const Eigen::Vector2d dir = Eigen::Rotation2Dd(theta) * heading;
+  env.SetWalkTarget(s.root_pos.head<2>() + dist * dir);
+  countdown_ = redraw_steps_;
+}
+
+void WalkTask::OnReset(HumanoidChairEnv& env, Rng& rng) {
+  const HumanoidState& s = env.humanoid_state();
+  prev_q_ = s.q;
+  prev_root_ = s.root_pos;
+  targets_reached_ = 0;
+  redrawn_ = reached_ = false;
+  terms_ = WalkTerms();
+  if (c_.stage == WalkStage::kTarget) {
+    DrawTarget(env, rng);
+  } else {
+    env.SetWalkTarget(Eigen::Vector2d(c_.forward_target[0], c_.forward_target[1]));
+  }
+  prev_distance_ = TargetDistance(env);
+}
+
+void WalkTask::BeforeObservation(HumanoidChairEnv& env, Rng& rng) {
+  redrawn_ = reached_ = false;
+  if (c_.stage != WalkStage::kTarget) return;
+  --countdown_;
+  reached_ = TargetDistance(env) < c_.target_reach_m;
+  if (reached_) ++targets_reached_;
+  if (reached_ || countdown_ <= 0) {
+    DrawTarget(env, rng);
+    redrawn_ = true;
+  }
+}
+
+TaskStep WalkTask::OnStep(const HumanoidChairEnv& env, const float* /*action*/) {
+  constexpr int n = HumanoidModel::kNumJoints;
+  const int k = env.episode_step();
+  const HumanoidState& s = env.humanoid_state();
+  const MotionPose ref = ReferenceAt(k);  // the reference index advances first (notes 3.2)
+  const SimilarityRewardConfig& sc = c_.similarity;
+  const bool fd = sc.finite_difference_velocities;
+  MotionPose ref_prev;
+  if (fd) ref_prev = ReferenceAt(k - 1);
+
+  double qdot[n], qdot_ref[n];
+  for (int j = 0; j < n; ++j) {
+    qdot[j] = fd ? (s.q[j] - prev_q_[j]) / dt_ : s.qd[j];
+    qdot_ref[j] = fd ? (ref.q[j] - ref_prev.q[j]) / dt_ : ref.qdot[j];
+  }
+  WalkTerms t;
+  t.pose = PoseReward(s.q.data(), ref.q.data(), n, sc.alpha_pose);
+  t.joint_vel = JointVelocityReward(qdot, qdot_ref, n, sc.alpha_vel);
+  t.similarity = sc.w_pose * t.pose + sc.w_vel * t.joint_vel;
+
+  if (c_.stage == WalkStage::kForward) {
+    const Eigen::Vector3d v =
+        fd ? Eigen::Vector3d((s.root_pos - prev_root_) / dt_) : s.root_lin_vel;
+    const Eigen::Vector3d v_ref =
+        fd ? Eigen::Vector3d((ref.root_pos - ref_prev.root_pos) / dt_) : ref.root_vel;
+    t.goal = RootVelocityReward(v.data(), v_ref.data(), c_.root_vel_weight, c_.root_vel_alpha);
+  } else {
+    const double d = TargetDistance(env);
+    // After a re-draw the progress is reset: that step earns the sigmoid at V = 0 (notes 4.4).
+    t.goal =
+        TargetProgressReward(redrawn_ ? d : prev_distance_, d, dt_, c_.target_weight, c_.target_k);
+    prev_distance_ = d;
+  }
+  t.target_redrawn = redrawn_;
+  t.target_reached = reached_;
+  t.total = t.similarity + t.goal;
+  terms_ = t;
+  prev_q_ = s.q;
+  prev_root_ = s.root_pos;
+
+  TaskStep r;
+  r.reward = static_cast<float>(t.total);
+  r.terminated = s.root_pos.z() < c_.min_root_z;
+  return r;
+}
+
+}  // namespace perch

@@ -1,0 +1,260 @@
+#include "tasks/walk_eval.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+#include "common/proto/wire.pb.h"
+#include "common/rng.h"
+
+namespace perch {
+namespace {
+
+constexpr char kCheckpointMagic[8] = {'P', 'E', 'R', 'C', 'H', 'C', 'K', 'P'};
+constexpr size_t kCheckpointHeader = 8 + 4 + 8 + 4;  // magic, format, length, CRC-32
+
+// CRC-32 (IEEE, reflected), as learner/service/checkpoint.cc frames checkpoints.
+uint32_t Crc32(const std::string& s) {
+  uint32_t crc = 0xFFFFFFFFu;
+  for (unsigned char b : s) {
+    crc ^= b;
+    for (int k = 0; k < 8; ++k) crc = (crc & 1) ? 0xEDB88320u ^ (crc >> 1) : crc >> 1;
+  }
+  return crc ^ 0xFFFFFFFFu;
+}
+
+template <typename T>
+T ReadLe(const std::string& s, size_t at) {
+  T v = 0;
+  for (size_t i = 0; i < sizeof(T); ++i)
+    v |= static_cast<T>(static_cast<unsigned char>(s[at + i])) << (8 * i);
+  return v;
+}
+
+// A parsed ModelWeights that is self-consistent (a shape and as many params as it says).
+bool Plausible(const proto::ModelWeights& w) {
+  return w.has_shape() && !w.shape().kind().empty() && w.shape().obs_dim() > 0 &&
+         w.params_size() > 0 && w.params_size() == w.shape().num_params();
+}
+
+}  // namespace
+
+proto::ModelWeights LoadModelFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw ConfigError(path + ": cannot open model file");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string bytes = ss.str();
+  if (bytes.empty()) throw ConfigError(path + ": empty model file");
+
+  if (bytes.size() >= 8 && std::memcmp(bytes.data(), kCheckpointMagic, 8) == 0) {
+    if (bytes.size() < kCheckpointHeader) throw ConfigError(path + ": truncated checkpoint header");
+    const uint64_t len = ReadLe<uint64_t>(bytes, 12);
+    const uint32_t crc = ReadLe<uint32_t>(bytes, 20);
+    if (bytes.size() - kCheckpointHeader != len) {
+      throw ConfigError(path + ": checkpoint payload is " +
+                        std::to_string(bytes.size() - kCheckpointHeader) + " bytes, header says " +
+                        std::to_string(len) + " (truncated or corrupt)");
+    }
+    const std::string payload = bytes.substr(kCheckpointHeader);
+    if (Crc32(payload) != crc) throw ConfigError(path + ": checkpoint CRC-32 mismatch (corrupt)");
+    proto::Checkpoint ck;
+    if (!ck.ParseFromString(payload))
+      throw ConfigError(path + ": checkpoint payload does not parse");
+    if (!ck.has_trainer() || !Plausible(ck.trainer().model())) {
+      throw ConfigError(path + ": checkpoint holds no usable trainer.model");
+    }
+    return ck.trainer().model();
+  }
+  // Protobuf parsing is lenient, so accept a message only when it is self-consistent.
+  proto::LearnerState state;
+  if (state.ParseFromString(bytes) && state.has_model() && Plausible(state.model())) {
+    return state.model();
+  }
+  proto::ModelWeights w;
+  if (w.ParseFromString(bytes) && Plausible(w)) return w;
+  throw ConfigError(path +
+                    ": not a perch.proto.ModelWeights, LearnerState or PERCHCKP checkpoint (" +
+                    std::to_string(bytes.size()) + " bytes; corrupt or another format)");
+}
+
+PolicyConfig PolicyConfigFromShape(const proto::PolicyShape& s, const std::string& ctx) {
+  PolicyConfig c;
+  if (s.kind() == "gaussian") {
+    c.kind = PolicyKind::kGaussian;
+  } else if (s.kind() == "meta") {
+    c.kind = PolicyKind::kMeta;
+  } else {
+    throw ConfigError(ctx + ".shape.kind: unknown \"" + s.kind() + "\"");
+  }
+  c.obs_dim = s.obs_dim();
+  c.act_dim = s.act_dim();
+  c.num_choices = s.num_choices();
+  c.target_choice = s.target_choice();
+  c.policy_net.hidden.assign(s.policy_hidden().begin(), s.policy_hidden().end());
+  c.value_net.hidden.assign(s.value_hidden().begin(), s.value_hidden().end());
+  c.policy_net.activation = c.value_net.activation =
+      ParseActivation(s.activation(), ctx + ".shape.activation");
+  if (s.std_mode() == "trained") {
+    c.std_mode = StdMode::kTrained;
+  } else if (s.std_mode() == "fixed") {
+    c.std_mode = StdMode::kFixed;
+  } else {
+    throw ConfigError(ctx + ".shape.std_mode: unknown \"" + s.std_mode() + "\"");
+  }
+  return c;
+}
+
+Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& weights,
+                  const WalkEvalOptions& o, WalkEvalRecording* rec) {
+  if (config_in.env.task != "walk")
+    throw ConfigError("eval: config task is \"" + config_in.env.task + "\", not walk");
+  if (o.episodes < 1) throw ConfigError("eval: --episodes must be >= 1");
+  TaskEnvConfig config = config_in;
+  const double dt = config.env.physics.physics_dt * config.env.physics.substeps;
+  const int no_fall_steps = static_cast<int>(std::ceil(o.no_fall_s / dt - 1e-9));
+  config.walk.max_episode_steps = std::max(config.walk.max_episode_steps, no_fall_steps);
+
+  std::unique_ptr<HumanoidChairEnv> env = MakeTaskHumanoidEnv(config);
+  const auto& task = dynamic_cast<const WalkTask&>(env->task());
+  const EnvSpec& spec = env->spec();
+  const PolicyConfig pc = PolicyConfigFromShape(weights.shape(), "model");
+  if (pc.kind != PolicyKind::kGaussian || pc.obs_dim != spec.obs_dim ||
+      pc.act_dim != spec.act_dim) {
+    throw ConfigError("model: shape " + weights.shape().kind() + " obs " +
+                      std::to_string(pc.obs_dim) + " act " + std::to_string(pc.act_dim) +
+                      " does not fit the walk env (gaussian obs " + std::to_string(spec.obs_dim) +
+                      " act " + std::to_string(spec.act_dim) + ")");
+  }
+  PolicyRunner runner(pc, NormalizerConfig());
+  runner.LoadWeights(weights);
+  runner.set_update_obs_stats(false);  // evaluation must not move the normaliser
+
+  // Toe of each foot: the foot capsule end point farthest forward (body +x), and its radius.
+  const HumanoidModel& model = env->model();
+  struct Toe {
+    int body;
+    Eigen::Vector3d local;
+    double radius;
+  };
+  std::vector<Toe> toes;
+  for (int b : model.foot_bodies()) {
+    Toe t{b, Eigen::Vector3d::Zero(), 0.0};
+    double best = -1e9;
+    for (const Geom& g : model.body(b).geoms) {
+      for (const Eigen::Vector3d& p : {g.from, g.to}) {
+        if (p.x() > best) best = p.x(), t.local = p, t.radius = g.radius;
+      }
+    }
+    toes.push_back(t);
+  }
+
+  const bool target_mode = config.walk.stage == WalkStage::kTarget;
+  std::vector<float> obs(spec.obs_dim), next(spec.obs_dim), action(spec.act_dim);
+  int no_fall = 0, falls = 0, invalid = 0, targets = 0;
+  int64_t steps_total = 0;
+  double sum_return = 0, sum_sim = 0, sum_heading = 0, sum_forward = 0;
+  double slide_speed_sum = 0;
+  int64_t near_ground = 0, sliding = 0;
+  for (int e = 0; e < o.episodes; ++e) {
+    // Episode e depends only on (seed, e): any subset of episodes can be rerun alone.
+    // (Rng::Seed scrambles its seed, so nearby integers give unrelated streams.)
+    const uint64_t episode_seed = o.seed * 1000003ULL + static_cast<uint64_t>(e);
+    env->Seed(2 * episode_seed);
+    Rng act_rng(2 * episode_seed + 1);
+    env->Reset(obs.data());
+    const double x0 = env->humanoid_state().root_pos.x();
+    std::vector<Eigen::Vector3d> prev_toe;
+    for (const Toe& t : toes) prev_toe.push_back(env->world().BodyPose(t.body) * t.local);
+    auto record = [&](int step) {
+      if (e != 0 || rec == nullptr) return;
+      const HumanoidState& s = env->humanoid_state();
+      PoseFrame f;
+      f.root_pos = s.root_pos;
+      f.root_quat = s.root_quat;
+      f.q.assign(s.q.begin(), s.q.end());
+      f.time_s = step * dt;
+      rec->frames.push_back(f);
+      if (target_mode &&
+          (rec->targets.empty() || (rec->targets.back() - env->walk_target()).norm() > 1e-9)) {
+        rec->targets.push_back(env->walk_target());
+      }
+    };
+    record(0);
+    int steps = 0;
+    bool fell = false;
+    for (;;) {
+      runner.Act(obs.data(), act_rng, !o.stochastic, nullptr, action.data());
+      const StepResult r = env->Step(action.data(), next.data());
+      ++steps;
+      sum_return += r.reward;
+      if (r.invalid) ++invalid;
+      if (!r.invalid) {
+        const WalkTerms& t = task.last_terms();
+        sum_sim += t.similarity;
+        if (t.target_reached) ++targets;
+        if (target_mode) {
+          const Eigen::Vector2d to = env->walk_target() - env->BodyXyz().head<2>();
+          const double err = AngleDiff(std::atan2(to.y(), to.x()), env->RootRpy().z());
+          sum_heading += std::abs(err) * 180.0 / M_PI;
+        }
+        for (size_t i = 0; i < toes.size(); ++i) {
+          const Eigen::Vector3d p = env->world().BodyPose(toes[i].body) * toes[i].local;
+          if (p.z() - toes[i].radius < o.toe_height_m) {
+            const double v = (p - prev_toe[i]).head<2>().norm() / dt;
+            slide_speed_sum += v;
+            ++near_ground;
+            if (v > o.slide_speed_mps) ++sliding;
+          }
+          prev_toe[i] = p;
+        }
+      }
+      record(steps);
+      obs.swap(next);
+      if (r.terminated) {
+        fell = true;
+        break;
+      }
+      if (r.truncated) break;
+    }
+    if (fell) ++falls;
+    if (!fell || steps >= no_fall_steps) ++no_fall;
+    steps_total += steps;
+    sum_forward += (env->humanoid_state().root_pos.x() - x0) / (steps * dt);
+  }
+  const double n = o.episodes;
+  const double secs = steps_total * dt;
+  Json j{{"task", "walk"},
+         {"stage", target_mode ? "target" : "forward"},
+         {"reward_variant", config.walk.reward_variant},
+         {"model_version", weights.version()},
+         {"episodes", o.episodes},
+         {"seed", o.seed},
+         {"stochastic", o.stochastic},
+         {"max_episode_steps", config.walk.max_episode_steps},
+         {"no_fall_seconds", o.no_fall_s},
+         {"no_fall_rate", no_fall / n},
+         {"fall_rate", falls / n},
+         {"invalid_episodes", invalid},
+         {"mean_episode_steps", steps_total / n},
+         {"mean_return", sum_return / n},
+         {"mean_reward", sum_return / static_cast<double>(steps_total)},
+         {"mean_imitation_reward", sum_sim / static_cast<double>(steps_total)},
+         {"mean_forward_speed_mps", sum_forward / n},
+         {"foot_sliding",
+          {{"toe_height_m", o.toe_height_m},
+           {"slide_speed_mps", o.slide_speed_mps},
+           {"mean_toe_speed_mps", near_ground ? slide_speed_sum / near_ground : 0.0},
+           {"sliding_fraction", near_ground ? static_cast<double>(sliding) / near_ground : 0.0},
+           {"sliding_count_per_s", sliding / secs}}}};
+  if (target_mode) {
+    j["targets_reached"] = targets;
+    j["targets_reached_per_min"] = targets / (secs / 60.0);
+    j["mean_heading_error_deg"] = sum_heading / static_cast<double>(steps_total);
+  }
+  return j;
+}
+
+}  // namespace perch

@@ -1,0 +1,43 @@
+// Evaluation of a walk policy (perch eval --task walk): seeded episodes with mean (or sampled)
+// actions, the paper's and DAFNet's metrics (docs/walk.md), and the frames for a filmstrip.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "common/json_util.h"
+#include "common/proto/model.pb.h"
+#include "learner/policy.h"
+#include "tasks/task_env.h"
+#include "viz/filmstrip.h"
+
+namespace perch {
+
+// Reads a policy file: a serialized perch.proto.ModelWeights, a LearnerState (its model), or a
+// cluster checkpoint ("PERCHCKP" frame around perch.proto.Checkpoint, learner/service/checkpoint.h:
+// its trainer.model). ConfigError naming the file on anything else (corrupt, truncated, empty).
+proto::ModelWeights LoadModelFile(const std::string& path);
+// The network config a ModelWeights' shape describes (ConfigError naming ctx on bad values).
+PolicyConfig PolicyConfigFromShape(const proto::PolicyShape& shape, const std::string& ctx);
+
+struct WalkEvalOptions {
+  int episodes = 10;
+  uint64_t seed = 0;
+  bool stochastic = false;         // default: the Gaussian's mean
+  double no_fall_s = 10.0;         // an episode counts as no-fall if it stays up this long [s]
+  double toe_height_m = 0.07;      // DAFNet: toe within 7 cm of the ground ...
+  double slide_speed_mps = 0.004;  // ... and moving faster than 0.4 cm/s: sliding
+};
+
+// Episode 0, for the filmstrip.
+struct WalkEvalRecording {
+  std::vector<PoseFrame> frames;
+  std::vector<Eigen::Vector2d> targets;  // distinct walk targets (target stage) [m]
+};
+
+// Runs the episodes. Episodes last at least no_fall_s (the time limit is raised when shorter).
+Json EvaluateWalk(const TaskEnvConfig& config, const proto::ModelWeights& weights,
+                  const WalkEvalOptions& options, WalkEvalRecording* recording);
+
+}  // namespace perch

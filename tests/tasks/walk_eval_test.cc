@@ -1,0 +1,205 @@
+#include "tasks/walk_eval.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "common/proto/model.pb.h"
+#include "common/proto/wire.pb.h"
+#include "learner/ppo.h"
+#include "viz/canvas.h"
+
+namespace perch {
+namespace {
+
+namespace fs = std::filesystem;
+
+proto::ModelWeights Untrained(uint64_t seed) {
+  PpoLearner learner(PolicyConfig::Subtask(52), PpoConfig::Subtask(), seed);
+  proto::ModelWeights w;
+  learner.ExportWeights(&w);
+  return w;
+}
+
+std::string Write(const std::string& name, const std::string& bytes) {
+  const std::string path = ::testing::TempDir() + "/" + name;
+  std::ofstream(path, std::ios::binary) << bytes;
+  return path;
+}
+
+TEST(WalkEval, WellFormedAndReproducible) {
+  TaskEnvConfig c = TaskEnvConfig::Defaults("walk");
+  c.walk.stage = WalkStage::kTarget;
+  const proto::ModelWeights w = Untrained(1);
+  WalkEvalOptions o;
+  o.episodes = 2;
+  o.seed = 4;
+  WalkEvalRecording rec;
+  const Json j = EvaluateWalk(c, w, o, &rec);
+  EXPECT_EQ(j["episodes"], 2);
+  for (const char* k : {"no_fall_rate", "mean_imitation_reward", "targets_reached_per_min",
+                        "mean_heading_error_deg", "mean_episode_steps"}) {
+    ASSERT_TRUE(j.contains(k)) << k;
+    EXPECT_TRUE(std::isfinite(j[k].get<double>())) << k;
+  }
+  EXPECT_GE(j["no_fall_rate"].get<double>(), 0.0);
+  EXPECT_LE(j["no_fall_rate"].get<double>(), 1.0);
+  EXPECT_GE(j["mean_heading_error_deg"].get<double>(), 0.0);
+  EXPECT_LE(j["mean_heading_error_deg"].get<double>(), 180.0);
+  // The similarity reward per step is within [0, w_pose + w_vel].
+  EXPECT_GE(j["mean_imitation_reward"].get<double>(), 0.0);
+  EXPECT_LE(j["mean_imitation_reward"].get<double>(), 0.55);
+  EXPECT_TRUE(j["foot_sliding"].contains("mean_toe_speed_mps"));
+  // Episode 0 recorded: one frame per step plus the start, and its targets.
+  EXPECT_GE(rec.frames.size(), 2u);
+  EXPECT_FALSE(rec.targets.empty());
+  // Same seed, same result; another seed may differ only through the env (targets).
+  EXPECT_EQ(EvaluateWalk(c, w, o, nullptr).dump(), j.dump());
+  // Forward stage has no target metrics.
+  c.walk.stage = WalkStage::kForward;
+  EXPECT_FALSE(EvaluateWalk(c, w, o, nullptr).contains("targets_reached_per_min"));
+}
+
+TEST(WalkEval, ReadsWeightsAndLearnerStateAndRefusesCorruptFiles) {
+  const proto::ModelWeights w = Untrained(2);
+  const std::string wpath = Write("walk_w.bin", w.SerializeAsString());
+  EXPECT_EQ(LoadModelFile(wpath).SerializeAsString(), w.SerializeAsString());
+
+  PpoLearner learner(PolicyConfig::Subtask(52), PpoConfig::Subtask(), 3);
+  proto::LearnerState s;
+  learner.ExportState(&s);
+  const std::string spath = Write("walk_s.bin", s.SerializeAsString());
+  EXPECT_EQ(LoadModelFile(spath).SerializeAsString(), s.model().SerializeAsString());
+
+  const std::string bytes = w.SerializeAsString();
+  for (const auto& [name, content] : std::vector<std::pair<std::string, std::string>>{
+           {"walk_garbage.bin", "not a model at all"},
+           {"walk_trunc.bin", bytes.substr(0, bytes.size() / 2)},
+           {"walk_empty.bin", ""},
+           {"walk_ckpt.bin", std::string("PERCHCKP\x01\x00\x00\x00", 12) + bytes}}) {
+    const std::string path = Write(name, content);
+    try {
+      LoadModelFile(path);
+      ADD_FAILURE() << name << " was accepted";
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_THROW(LoadModelFile(::testing::TempDir() + "/walk_missing.bin"), ConfigError);
+
+  // A model of another shape is refused by the evaluation.
+  PpoLearner other(PolicyConfig::Subtask(57), PpoConfig::Subtask(), 3);
+  proto::ModelWeights ow;
+  other.ExportWeights(&ow);
+  EXPECT_THROW(EvaluateWalk(TaskEnvConfig::Defaults("walk"), ow, WalkEvalOptions(), nullptr),
+               ConfigError);
+}
+
+// The cluster's frame (learner/service/checkpoint.h), written independently here.
+uint32_t TestCrc32(const std::string& s) {
+  uint32_t crc = 0xFFFFFFFFu;
+  for (unsigned char b : s) {
+    crc ^= b;
+    for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+  }
+  return ~crc;
+}
+
+std::string Frame(const std::string& payload) {
+  std::string out = "PERCHCKP";
+  auto put = [&out](uint64_t v, int bytes) {
+    for (int i = 0; i < bytes; ++i) out.push_back(static_cast<char>((v >> (8 * i)) & 0xff));
+  };
+  put(1, 4);
+  put(payload.size(), 8);
+  put(TestCrc32(payload), 4);
+  return out + payload;
+}
+
+TEST(WalkEval, ReadsClusterCheckpointsAndRefusesDamagedOnes) {
+  ASSERT_EQ(TestCrc32("123456789"), 0xCBF43926u);  // the CRC-32 check value
+  PpoLearner learner(PolicyConfig::Subtask(52), PpoConfig::Subtask(), 6);
+  proto::Checkpoint ck;
+  learner.ExportState(ck.mutable_trainer());
+  ck.set_seed(6);
+  const std::string framed = Frame(ck.SerializeAsString());
+  EXPECT_EQ(LoadModelFile(Write("walk_ck.bin", framed)).SerializeAsString(),
+            ck.trainer().model().SerializeAsString());
+  std::string flipped = framed;
+  flipped[framed.size() / 2] ^= 0x10;
+  const std::string fpath = Write("walk_ck_flip.bin", flipped);
+  try {
+    LoadModelFile(fpath);
+    ADD_FAILURE() << "flipped byte accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("CRC"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(LoadModelFile(Write("walk_ck_trunc.bin", framed.substr(0, framed.size() - 3))),
+               ConfigError);
+}
+
+std::string RunPerch(const std::string& args, int* rc, std::string* err) {
+  const std::string out = ::testing::TempDir() + "/walk_cli_out.txt";
+  const std::string errp = ::testing::TempDir() + "/walk_cli_err.txt";
+  *rc = WEXITSTATUS(std::system(
+      (std::string(std::getenv("PERCH_BIN")) + " " + args + " >" + out + " 2>" + errp).c_str()));
+  std::stringstream a, b;
+  a << std::ifstream(out).rdbuf();
+  b << std::ifstream(errp).rdbuf();
+  *err = b.str();
+  return a.str();
+}
+
+TEST(EvalCommand, JsonAndFilmstripOfTheRightSize) {
+  if (!std::getenv("PERCH_BIN")) GTEST_SKIP() << "PERCH_BIN not set";
+  const std::string model = Write("walk_cli_w.bin", Untrained(5).SerializeAsString());
+  const std::string png = ::testing::TempDir() + "/walk_cli.png";
+  fs::remove(png);
+  int rc = 0;
+  std::string err;
+  const std::string out =
+      RunPerch("eval --task walk --stage target --model " + model +
+                   " --episodes 2 --json --filmstrip " + png + " --frames 4 --panel-px 100",
+               &rc, &err);
+  ASSERT_EQ(rc, 0) << err;
+  const Json j = Json::parse(out);  // exactly one JSON object on stdout
+  EXPECT_EQ(j["episodes"], 2);
+  EXPECT_TRUE(j.contains("targets_reached_per_min"));
+  EXPECT_EQ(j["config"]["walk"]["stage"], "target");
+  const Canvas c = Canvas::LoadPng(png);
+  EXPECT_EQ(c.width(), 4 * 100);
+  EXPECT_EQ(c.height(), 2 * 100 + 1);
+
+  const std::string bad = Write("walk_cli_bad.bin", "garbage");
+  RunPerch("eval --task walk --model " + bad + " --json", &rc, &err);
+  EXPECT_EQ(rc, 2);
+  EXPECT_NE(err.find("perch: error: " + bad), std::string::npos) << err;
+}
+
+TEST(EvalCommand, TrainLocalWritesWeightsThatEvalReads) {
+  if (!std::getenv("PERCH_BIN")) GTEST_SKIP() << "PERCH_BIN not set";
+  const std::string dir = ::testing::TempDir() + "/walk_train_local";
+  fs::remove_all(dir);
+  int rc = 0;
+  std::string err;
+  const Json s = Json::parse(RunPerch(
+      "train-local --task walk --samples 256 --steps-per-update 128 --out " + dir + " --json", &rc,
+      &err));
+  ASSERT_EQ(rc, 0) << err;
+  EXPECT_EQ(s["updates"], 2);
+  std::ifstream csv(dir + "/curve.csv");
+  std::string line;
+  int lines = 0;
+  while (std::getline(csv, line)) ++lines;
+  EXPECT_EQ(lines, 1 + 2);  // header + one row per update
+  const Json j = Json::parse(RunPerch(
+      "eval --task walk --model " + dir + "/learner_state.bin --episodes 1 --json", &rc, &err));
+  ASSERT_EQ(rc, 0) << err;
+  EXPECT_EQ(j["model_version"], 2);
+}
+
+}  // namespace
+}  // namespace perch
