@@ -1,8 +1,7 @@
 #include "actor/experiment.h"
 
 #ifdef PERCH_HAVE_ENVS
-#include "envs/env_config.h"
-#include "envs/humanoid_env.h"
+#include "tasks/task_env.h"
 #endif
 
 namespace perch {
@@ -53,7 +52,8 @@ Json ToJson(const ExperimentConfig& c) {
 std::unique_ptr<Env> MakeExperimentEnv(const ExperimentConfig& c) {
   if (c.env_backend == "mock") return std::make_unique<MockEnv>(c.mock_env);
 #ifdef PERCH_HAVE_ENVS
-  return MakeEnv(EnvConfig::FromJson(c.env, c.source + ".env"));
+  // Any task by name (stand, walk, ...): tasks/ builds the humanoid-chair env with it.
+  return MakeTaskEnv(TaskEnvConfig::FromJson(c.env, c.source + ".env"));
 #else
   throw ConfigError(c.source + ".env_backend: \"bullet\": this build has no envs/ library");
 #endif

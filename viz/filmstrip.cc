@@ -131,6 +131,10 @@ Canvas RenderFilmstrip(const HumanoidModel& model, const Chair* chair,
     lo = lo.cwiseMin(chair_pose.translation().head<2>());
     hi = hi.cwiseMax(chair_pose.translation().head<2>());
   }
+  for (const Eigen::Vector2d& t : options.targets) {
+    lo = lo.cwiseMin(t);
+    hi = hi.cwiseMax(t);
+  }
   const double extent =
       std::max(options.min_extent_m, (hi - lo).maxCoeff() + 2.0 * options.margin_m);
   const double scale = px / extent;

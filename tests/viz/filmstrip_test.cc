@@ -76,6 +76,20 @@ TEST(Filmstrip, ChairSeatVisibleAndFramesPicked) {
   EXPECT_EQ(c.at(seat.x(), seat.y()), kSeat);
 }
 
+TEST(Filmstrip, FarWalkTargetIsInsideTheFixedWindow) {
+  const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
+  FilmstripOptions opt;
+  opt.panel_px = 200;
+  opt.targets = {Eigen::Vector2d(4.0, 3.0)};
+  const Canvas c =
+      RenderFilmstrip(model, nullptr, Eigen::Isometry3d::Identity(), {Standing(0, 0)}, opt);
+  const Rgb target{30, 160, 60};
+  int green = 0;
+  for (int y = 201; y < c.height(); ++y)
+    for (int x = 0; x < c.width(); ++x) green += c.at(x, y) == target;
+  EXPECT_GT(green, 10);
+}
+
 TEST(Canvas, PngRoundTripAndFailedSaveLeavesNothing) {
   Canvas c(17, 9, Rgb{1, 2, 3});
   c.FillCapsule(Eigen::Vector2d(2, 2), Eigen::Vector2d(14, 6), 2.0, Rgb{200, 100, 50});
