@@ -106,7 +106,12 @@ bool ActorService::PollWeights(int timeout_ms) {
   zmq::message_t msg, newest;
   bool got = false;
   zmq::pollitem_t item{sub_.handle(), 0, ZMQ_POLLIN, 0};
-  if (zmq::poll(&item, 1, std::chrono::milliseconds(timeout_ms)) <= 0) return false;
+  try {
+    if (zmq::poll(&item, 1, std::chrono::milliseconds(timeout_ms)) <= 0) return false;
+  } catch (const zmq::error_t& e) {
+    if (e.num() != EINTR) throw;  // a stop signal: the caller sees the flag
+    return false;
+  }
   while (sub_.recv(msg, zmq::recv_flags::dontwait)) {
     newest.move(msg);
     got = true;

@@ -382,7 +382,14 @@ void LearnerService::Run() {
         counters_.updates() >= static_cast<uint64_t>(options_.max_updates)) {
       break;
     }
-    zmq::poll(items, 2, std::chrono::milliseconds(100));
+    try {
+      zmq::poll(items, 2, std::chrono::milliseconds(100));
+    } catch (const zmq::error_t& e) {
+      // A signal (Ctrl-C, SIGTERM) interrupts the poll: loop to see the stop flag, then write
+      // the final checkpoint.
+      if (e.num() != EINTR) throw;
+      continue;
+    }
     if (items[1].revents & ZMQ_POLLIN) {
       zmq::message_t sub;
       bool any_subscribe = false;

@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <fstream>
 #include <set>
@@ -100,6 +101,38 @@ TEST(TrainLauncherTest, RestartsDeadActorAndStopsCleanlyOnSigterm) {
   std::snprintf(name, sizeof(name), "/checkpoints/ckpt-%010d.bin",
                 rows.back()["update"].get<int>());
   EXPECT_EQ(::access((run + name).c_str(), F_OK), 0) << run + name;
+  for (pid_t c : children) EXPECT_NE(::kill(c, 0), 0) << "child " << c << " still running";
+}
+
+// Ctrl-C in a terminal sends SIGINT to every process of the job at once; each blocking socket
+// call is interrupted (EINTR) and the learner must still write its final checkpoint.
+TEST(TrainLauncherTest, CtrlCToTheWholeJobWritesFinalCheckpoint) {
+  if (PerchBin().empty()) GTEST_SKIP() << "PERCH_BIN not set";
+  const std::string dir = TempDir("train-int");
+  const std::string cfg = WriteConfig(dir, MockConfig({{"checkpoint_every", 1000}}));
+  const std::string run = dir + "/run";
+  const pid_t train = Spawn(TrainArgv(cfg, run), dir + "/train.log");
+  ASSERT_TRUE(WaitUntil([&] { return ReadMetrics(run).size() >= 2; }, 30.0))
+      << ReadFile(dir + "/train.log");
+  const std::vector<pid_t> children = Children(train);
+  ASSERT_EQ(children.size(), 3u);  // learner + 2 actors
+  // Pause the actors so that the learner sits in its socket poll, where the signal lands.
+  const std::set<pid_t> actors = ActorChildren(train);
+  for (pid_t a : actors) ::kill(a, SIGSTOP);
+  ::usleep(300 * 1000);
+  ::kill(train, SIGINT);
+  for (pid_t c : children) ::kill(c, SIGINT);
+  for (pid_t a : actors) ::kill(a, SIGCONT);
+  int status = 0;
+  ASSERT_TRUE(WaitFor(train, 60.0, &status)) << ReadFile(dir + "/train.log");
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0)
+      << DescribeStatus(status) << "\n" << ReadFile(dir + "/train.log");
+  const std::vector<Json> rows = ReadMetrics(run);
+  char name[64];
+  std::snprintf(name, sizeof(name), "/checkpoints/ckpt-%010d.bin",
+                rows.back()["update"].get<int>());
+  EXPECT_EQ(::access((run + name).c_str(), F_OK), 0) << run + name << "\n"
+                                                    << ReadFile(dir + "/train.log");
   for (pid_t c : children) EXPECT_NE(::kill(c, 0), 0) << "child " << c << " still running";
 }
 
