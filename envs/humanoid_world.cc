@@ -1,5 +1,6 @@
 #include "envs/humanoid_world.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <btBulletDynamicsCommon.h>
@@ -17,9 +18,6 @@ namespace {
 
 // Tags in btCollisionObject::userIndex, to classify contacts.
 enum ObjectKind { kFloor = 1, kChair = 2, kHumanoid = 3 };
-
-// Helper links are point-like; their inertia only has to keep the articulated inertia regular.
-constexpr double kHelperInertiaRadius = 0.01;  // [m]
 
 btVector3 Bt(const Eigen::Vector3d& v) { return btVector3(v.x(), v.y(), v.z()); }
 Eigen::Vector3d Ei(const btVector3& v) { return Eigen::Vector3d(v.x(), v.y(), v.z()); }
@@ -55,7 +53,8 @@ PhysicsConfig PhysicsConfig::FromJson(const Json& j, const std::string& ctx) {
   CheckKnownKeys(j,
                  {"physics_dt", "substeps", "gravity", "solver_iterations", "contact_erp",
                   "floor_friction", "humanoid_friction", "chair_friction", "linear_damping",
-                  "angular_damping", "max_joint_speed", "contact_distance", "limit_margin"},
+                  "angular_damping", "max_joint_speed", "contact_distance", "limit_margin",
+                  "joint_damping", "damping_speed", "helper_link_inertia"},
                  ctx);
   PhysicsConfig c;
   GetOptional(j, "physics_dt", c.physics_dt, ctx);
@@ -73,6 +72,12 @@ PhysicsConfig PhysicsConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!(c.max_joint_speed > 0.0)) throw ConfigError(ctx + ".max_joint_speed: must be > 0");
   GetOptional(j, "limit_margin", c.limit_margin, ctx);
   if (!(c.limit_margin >= 0.0)) throw ConfigError(ctx + ".limit_margin: must be >= 0");
+  GetOptional(j, "joint_damping", c.joint_damping, ctx);
+  if (!(c.joint_damping >= 0.0)) throw ConfigError(ctx + ".joint_damping: must be >= 0");
+  GetOptional(j, "damping_speed", c.damping_speed, ctx);
+  GetOptional(j, "helper_link_inertia", c.helper_link_inertia, ctx);
+  if (!(c.helper_link_inertia > 0.0)) throw ConfigError(ctx + ".helper_link_inertia: must be > 0");
+  if (!(c.damping_speed >= 0.0)) throw ConfigError(ctx + ".damping_speed: must be >= 0 (0: off)");
   if (!(c.physics_dt > 0.0 && c.physics_dt < 0.1)) throw ConfigError(ctx + ".physics_dt: must be in (0, 0.1) s");
   if (c.substeps < 1) throw ConfigError(ctx + ".substeps: must be >= 1");
   if (c.solver_iterations < 1) throw ConfigError(ctx + ".solver_iterations: must be >= 1");
@@ -96,7 +101,10 @@ Json PhysicsConfig::ToJson() const {
               {"angular_damping", angular_damping},
               {"contact_distance", contact_distance},
               {"max_joint_speed", max_joint_speed},
-              {"limit_margin", limit_margin}};
+              {"limit_margin", limit_margin},
+              {"joint_damping", joint_damping},
+              {"damping_speed", damping_speed},
+              {"helper_link_inertia", helper_link_inertia}};
 }
 
 Eigen::Isometry3d ChairPlacement::Transform() const {
@@ -174,10 +182,64 @@ struct World::Scene {
 
 World::World(const HumanoidModel& model, const Chair* chair, const ChairPlacement& placement,
              const PhysicsConfig& config)
-    : model_(model), chair_(chair), placement_(placement), config_(config) {
+    : model_(model),
+      chair_(chair),
+      placement_(placement),
+      config_(config) {
+  damping_.resize(model.num_joints());
+  for (int j = 0; j < model.num_joints(); ++j) {
+    damping_[j] = config.joint_damping +
+                  (config.damping_speed > 0.0 ? model.joint(j).max_torque / config.damping_speed : 0.0);
+  }
   HumanoidState standing;
   standing.root_pos = Eigen::Vector3d(0, 0, model.standing_root_height());
+  HumanoidState upright = standing;  // the joint-space inertia's pose: angles 0 clipped to limits
+  for (int j = 0; j < model.num_joints(); ++j) {
+    upright.q[j] = std::clamp(0.0, model.joint(j).lower, model.joint(j).upper);
+  }
+  // Backward Euler for the damping of all joints together, with the free-floating inverse
+  // joint-space inertia of the upright pose (docs/env.md "Joint damping"):
+  // qd' = qd + h Minv (tau - C qd')  =>  qd' = B (qd + h Minv tau), B = (1 + h Minv C)^-1.
+  const int nj = model.num_joints();
+  if (*std::max_element(damping_.begin(), damping_.end()) > 0.0) {
+    const Eigen::MatrixXd minv = InverseJointInertia(upright);
+    const Eigen::MatrixXd c = Eigen::Map<const Eigen::VectorXd>(damping_.data(), nj).asDiagonal();
+    damp_push_ = config.physics_dt * minv;
+    damp_solve_ = (Eigen::MatrixXd::Identity(nj, nj) + damp_push_ * c).inverse();
+  }
   SetState(standing);
+}
+
+Eigen::MatrixXd World::InverseJointInertia(HumanoidState s) {
+  s.root_pos.z() += 100.0;  // out of reach of the floor and chair
+  s.root_lin_vel.setZero();
+  s.root_ang_vel.setZero();
+  for (double& v : s.qd) v = 0.0;
+  SetState(s);
+  Scene& sc = *scene_;
+  const std::array<double, HumanoidModel::kNumJoints> zero{};
+  SetJointTorques(zero.data());
+  for (int j = 0; j < model_.num_joints(); ++j) {
+    if (sc.limit_active[j]) sc.world.removeMultiBodyConstraint(sc.constraints[j].get());
+    sc.limit_active[j] = 0;
+  }
+  // One step computes the articulated-body inertias that calcAccelerationDeltasMultiDof uses.
+  sc.world.stepSimulation(config_.physics_dt, 0, config_.physics_dt);
+  btMultiBody* mb = sc.body.get();
+  const int n = 6 + mb->getNumDofs();
+  std::vector<btScalar> force(n, 0), accel(n, 0);
+  btAlignedObjectArray<btScalar> scratch_r;
+  btAlignedObjectArray<btVector3> scratch_v;
+  const int nj = model_.num_joints();
+  Eigen::MatrixXd minv(nj, nj);
+  for (int j = 0; j < nj; ++j) {
+    const int dof = 6 + mb->getLink(sc.joint_link[j]).m_dofOffset;
+    force[dof] = 1;
+    mb->calcAccelerationDeltasMultiDof(force.data(), accel.data(), scratch_r, scratch_v);
+    force[dof] = 0;
+    for (int k = 0; k < nj; ++k) minv(k, j) = accel[6 + mb->getLink(sc.joint_link[k]).m_dofOffset];
+  }
+  return minv;
 }
 
 World::~World() = default;
@@ -271,7 +333,7 @@ void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
       const double mass = carrier ? b.mass : hm;
       const Eigen::Vector3d inertia =
           carrier ? b.principal_inertia
-                  : Eigen::Vector3d::Constant(0.4 * hm * kHelperInertiaRadius * kHelperInertiaRadius);
+                  : Eigen::Vector3d::Constant(config_.helper_link_inertia);
       mb->setupRevolute(link, mass, Bt(inertia), parent_link, Bt(rot_parent_to_this.normalized()),
                         Bt(axis), Bt(parent_to_pivot), Bt(pivot_to_com), true);
       mb->getLink(link).m_flags |= BT_MULTIBODYLINKFLAGS_DISABLE_ALL_PARENT_COLLISION;
@@ -425,26 +487,42 @@ void World::UpdateJointLimits() {
 
 void World::StepPhysics() {
   Scene& sc = *scene_;
-  btMultiBody* mb = sc.body.get();
   UpdateJointLimits();
-  for (int j = 0; j < model_.num_joints(); ++j) mb->addJointTorque(sc.joint_link[j], tau_[j]);
+  AddJointTorques(tau_.data());
   // maxSubSteps = 0: exactly one step of physics_dt (Bullet clears the torques afterwards).
   sc.world.stepSimulation(config_.physics_dt, 0, config_.physics_dt);
 }
 
 void World::RawControlStepsPd(int n, const PdController& pd, const float* action) {
   Scene& sc = *scene_;
-  btMultiBody* mb = sc.body.get();
   double q[HumanoidModel::kNumJoints], qd[HumanoidModel::kNumJoints], tau[HumanoidModel::kNumJoints];
   for (int i = 0; i < n; ++i) {
     for (int s = 0; s < config_.substeps; ++s) {
       UpdateJointLimits();
       ReadJoints(q, qd);
       pd.Torques(action, q, qd, tau);
-      for (int j = 0; j < model_.num_joints(); ++j) mb->addJointTorque(sc.joint_link[j], tau[j]);
+      AddJointTorques(tau);
       sc.world.stepSimulation(config_.physics_dt, 0, config_.physics_dt);
     }
   }
+}
+
+void World::AddJointTorques(const double* tau) {
+  btMultiBody* mb = scene_->body.get();
+  const int nj = model_.num_joints();
+  if (damp_solve_.size() == 0) {
+    for (int j = 0; j < nj; ++j) mb->addJointTorque(scene_->joint_link[j], tau[j]);
+    return;
+  }
+  Eigen::Matrix<double, HumanoidModel::kNumJoints, 1> t, v;
+  for (int j = 0; j < nj; ++j) {
+    t[j] = tau[j];
+    v[j] = mb->getJointVel(scene_->joint_link[j]);
+  }
+  // Damp the speeds the joints will have after this step (coupled backward Euler), so that
+  // strong damping stays stable on the light feet and hands.
+  const Eigen::Matrix<double, HumanoidModel::kNumJoints, 1> next = damp_solve_ * (v + damp_push_ * t);
+  for (int j = 0; j < nj; ++j) mb->addJointTorque(scene_->joint_link[j], t[j] - damping_[j] * next[j]);
 }
 
 void World::ReadJoints(double* q, double* qd) const {

@@ -12,6 +12,7 @@
 #include <memory>
 #include <vector>
 
+#include <Eigen/Dense>
 #include <Eigen/Geometry>
 
 #include "common/json_util.h"
@@ -41,6 +42,15 @@ struct PhysicsConfig {
   double contact_distance = 0.02;
   // A joint's limit constraint is active only within limit_margin + 2 |qdot| dt of a limit [rad].
   double limit_margin = 0.05;
+  // Passive joint damping, applied implicitly (docs/env.md "Stability under random actions"):
+  // c_j = joint_damping + max_torque_j / damping_speed, i.e. full torque alone cannot spin a
+  // joint faster than damping_speed. joint_damping 0 and damping_speed 0: none (the authors').
+  double joint_damping = 0.0;  // [N m s/rad], every joint
+  double damping_speed = 15.0;  // [rad/s]; 0: off
+  // Rotational inertia of each helper link (isotropic) [kg m^2]. The authors' importer: about
+  // 4e-8 (a 1 g point), which lets the ankles and hips reach Bullet's speed clamp within one
+  // control step; 1e-2 is about twice the foot's inertia about the ankle (docs/env.md).
+  double helper_link_inertia = 1e-2;
 
   static PhysicsConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;
@@ -127,12 +137,20 @@ class World {
  private:
   struct Scene;
   void UpdateJointLimits();
+  // The joint block of the free-floating inverse mass matrix in pose s [1/(kg m^2)], observation
+  // order; rebuilds the world.
+  Eigen::MatrixXd InverseJointInertia(HumanoidState s);
+  // Adds tau [num_joints] (observation order) plus the implicit passive damping to the joints.
+  void AddJointTorques(const double* tau);
   const HumanoidModel& model_;
   const Chair* chair_;
   ChairPlacement placement_;
   PhysicsConfig config_;
   std::unique_ptr<Scene> scene_;
   std::array<double, HumanoidModel::kNumJoints> tau_{};
+  std::vector<double> damping_;  // [num_joints] passive damping c_j [N m s/rad]
+  Eigen::MatrixXd damp_push_;   // [nj x nj] h Minv [s/(kg m^2)]; empty: no damping
+  Eigen::MatrixXd damp_solve_;  // [nj x nj] (1 + h Minv C)^-1
 };
 
 }  // namespace perch

@@ -3,11 +3,7 @@
 #include <algorithm>
 
 namespace perch {
-namespace {
 
-// Effective inertia of each hinge [kg m^2]: the two parts it separates (its body's subtree and the
-// rest) taken as rigid bodies rotating about the hinge axis, combined as a reduced inertia
-// I_sub I_rest / (I_sub + I_rest); evaluated in the pose `q` (observation order).
 std::vector<double> EffectiveJointInertia(const HumanoidModel& m, const double* q) {
   const FkResult fk = ForwardKinematics(m, Eigen::Vector3d::Zero(), Eigen::Quaterniond::Identity(), q);
   std::vector<double> out(m.num_joints());
@@ -31,16 +27,14 @@ std::vector<double> EffectiveJointInertia(const HumanoidModel& m, const double* 
   return out;
 }
 
-}  // namespace
+std::vector<double> StandingJointInertia(const HumanoidModel& m) {
+  std::vector<double> q(m.num_joints());
+  for (int j = 0; j < m.num_joints(); ++j) q[j] = std::clamp(0.0, m.joint(j).lower, m.joint(j).upper);
+  return EffectiveJointInertia(m, q.data());
+}
 
 PdController::PdController(const HumanoidModel& model, double dt, bool implicit)
-    : model_(model), dt_(dt), implicit_(implicit) {
-  std::vector<double> q(model.num_joints());
-  for (int j = 0; j < model.num_joints(); ++j) {
-    q[j] = std::clamp(0.0, model.joint(j).lower, model.joint(j).upper);  // standing pose
-  }
-  inertia_ = EffectiveJointInertia(model, q.data());
-}
+    : model_(model), dt_(dt), implicit_(implicit), inertia_(StandingJointInertia(model)) {}
 
 double PdController::Target(int joint, float a) const {
   const Joint& jt = model_.joint(joint);

@@ -7,6 +7,13 @@
 
 namespace perch {
 
+// Effective inertia of each hinge [kg m^2], observation order: the two parts it separates (its
+// body's subtree and the rest) as rigid bodies about the hinge axis, combined as the reduced
+// inertia I_sub I_rest / (I_sub + I_rest); in the pose q [num_joints] (observation order).
+std::vector<double> EffectiveJointInertia(const HumanoidModel& m, const double* q);
+// The same in the standing pose (angles 0 clipped into the limits).
+std::vector<double> StandingJointInertia(const HumanoidModel& m);
+
 class PdController {
  public:
   // dt: the physics step [s]; implicit: velocity-implicit damping per joint (docs/env.md).

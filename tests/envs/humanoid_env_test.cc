@@ -354,6 +354,36 @@ TEST(HumanoidEnv, RandomActionsDoNotMostlyEndInvalid) {
   EXPECT_LT(static_cast<double>(invalid) / episodes, 0.3);
 }
 
+// Random N(0, 1) actions (an untrained policy) from the default spawn must never launch the
+// humanoid: with the authors' near-massless helper links and no joint damping, torque mode sent
+// about a third of such episodes into the air (root speed > 10 m/s) or flagged them invalid.
+TEST(HumanoidEnv, RandomActionsNeverLaunchTheHumanoid) {
+  for (ActionMode mode : {ActionMode::kTorque, ActionMode::kPd}) {
+    EnvConfig c;
+    c.action_mode = mode;
+    HumanoidChairEnv env(c);
+    env.Seed(7);
+    std::vector<float> obs(env.spec().obs_dim), act(21);
+    Rng rng(13);
+    int episodes = 0, invalid = 0, fast = 0;
+    env.Reset(obs.data());
+    for (int t = 0; t < 1500; ++t) {
+      for (float& a : act) a = static_cast<float>(rng.Normal());
+      const StepResult r = env.Step(act.data(), obs.data());
+      fast += env.humanoid_state().root_lin_vel.norm() > c.safety.max_root_speed;
+      if (r.terminated || r.truncated) {
+        ++episodes;
+        invalid += r.invalid;
+        env.Reset(obs.data());
+      }
+    }
+    const char* name = mode == ActionMode::kPd ? "pd" : "torque";
+    EXPECT_GT(episodes, 10) << name;  // the humanoid does fall: the actions are not too weak
+    EXPECT_EQ(invalid, 0) << name;
+    EXPECT_EQ(fast, 0) << name;
+  }
+}
+
 TEST(HumanoidEnv, StandTaskTerminatesOnFallAndTruncatesAtLimit) {
   EnvConfig c;  // torque mode, zero torques: the humanoid collapses
   c.stand.max_episode_steps = 400;
