@@ -14,6 +14,7 @@
 #include "motion/reference_compare.h"
 #include "motion/reference_motion.h"
 #include "motion/retarget.h"
+#include "tasks/walk.h"
 
 namespace perch {
 namespace {
@@ -136,19 +137,6 @@ struct TrackArgs {
   bool json = false;
 };
 
-HumanoidState StateOf(const MotionPose& p) {
-  HumanoidState s;
-  s.root_pos = p.root_pos;
-  s.root_quat = p.root_rot;
-  s.root_lin_vel = p.root_vel;
-  s.root_ang_vel = p.root_angvel;
-  for (int j = 0; j < HumanoidModel::kNumJoints; ++j) {
-    s.q[j] = p.q[j];
-    s.qd[j] = p.qdot[j];
-  }
-  return s;
-}
-
 void RunTrack(const TrackArgs& a) {
   const std::string path = a.motions + "/" + a.name + ".json";
   ReferenceMotion ref = ReferenceMotion::Load(path);
@@ -172,7 +160,7 @@ void RunTrack(const TrackArgs& a) {
     p.root_pos += shift;
     return p;
   };
-  env.ResetToState(StateOf(pose_at(0.0)), obs.data());
+  env.ResetToState(HumanoidStateFromPose(pose_at(0.0)), obs.data());
   const double dt = env.spec().control_dt;
   const double seconds =
       a.seconds > 0 ? a.seconds : (ref.loop() ? 5 * ref.duration() : ref.duration());

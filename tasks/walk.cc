@@ -120,8 +120,7 @@ MotionPose WalkTask::ReferenceAt(int step) const {
   return p;
 }
 
-HumanoidState WalkTask::ReferenceState(int step) const {
-  const MotionPose p = ReferenceAt(step);
+HumanoidState HumanoidStateFromPose(const MotionPose& p) {
   HumanoidState s;
   s.root_pos = p.root_pos;
   s.root_quat = p.root_rot;
@@ -132,6 +131,10 @@ HumanoidState WalkTask::ReferenceState(int step) const {
     s.qd[j] = p.qdot[j];
   }
   return s;
+}
+
+HumanoidState WalkTask::ReferenceState(int step) const {
+  return HumanoidStateFromPose(ReferenceAt(step));
 }
 
 bool WalkTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) {

@@ -20,6 +20,10 @@
 
 namespace perch {
 
+// The env state (world frame) of a reference pose: root pose and velocities, joint angles and
+// velocities. Used to start episodes from, or track, a reference motion.
+HumanoidState HumanoidStateFromPose(const MotionPose& p);
+
 enum class WalkStage { kForward, kTarget };
 
 struct WalkTaskConfig {
