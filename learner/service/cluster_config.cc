@@ -20,7 +20,8 @@ Json ToJson(const ClusterConfig& c) {
               {"hierarchy_meta_period", c.hierarchy_meta_period},
               {"hierarchy_enabled", c.hierarchy_enabled},
               {"restart_backoff_ms", c.restart_backoff_ms},
-              {"learner_queue_segments", c.learner_queue_segments}};
+              {"learner_queue_segments", c.learner_queue_segments},
+              {"init_from", c.init_from}};
 }
 
 namespace {
@@ -38,7 +39,7 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
       {"task", "segment_steps", "envs_per_actor", "max_policy_lag", "checkpoint_every", "keep_last",
        "milestone_every", "heartbeat_s", "actor_timeout_s", "max_message_bytes",
        "max_segment_steps", "reconnect_ivl_ms", "hierarchy_meta_period", "hierarchy_enabled",
-       "restart_backoff_ms", "learner_queue_segments"},
+       "restart_backoff_ms", "learner_queue_segments", "init_from"},
       ctx);
   ClusterConfig c;
   GetOptional(j, "task", c.task, ctx);
@@ -57,6 +58,7 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "hierarchy_enabled", c.hierarchy_enabled, ctx);
   GetOptional(j, "restart_backoff_ms", c.restart_backoff_ms, ctx);
   GetOptional(j, "learner_queue_segments", c.learner_queue_segments, ctx);
+  GetOptional(j, "init_from", c.init_from, ctx);
   TaskFromName(c.task, ctx + ".task");
   CheckMin(ctx, "segment_steps", c.segment_steps, 1);
   CheckMin(ctx, "envs_per_actor", c.envs_per_actor, 1);

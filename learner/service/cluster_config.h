@@ -31,6 +31,10 @@ struct ClusterConfig {
   // Segments queued per actor connection at the learner (ZeroMQ receive high-water mark). Small,
   // so that a fast actor blocks instead of filling a queue whose tail would be stale on arrival.
   int learner_queue_segments = 16;
+  // A new run (not a resume) starts from this checkpoint's policy weights and observation
+  // normalizer: fine-tuning, e.g. walk stage 2 from stage 1 (notes §8.2 "init"). Adam, reward
+  // scaling and counters start fresh. Empty: from scratch. Relative paths: the project root.
+  std::string init_from;
 };
 
 Json ToJson(const ClusterConfig& c);

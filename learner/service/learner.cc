@@ -9,6 +9,7 @@
 #include <fstream>
 #include <numeric>
 
+#include "common/paths.h"
 #include "common/proto/model.pb.h"
 
 namespace perch {
@@ -99,11 +100,13 @@ void LearnerService::Resume() {
                         "); pass --resume to continue that run or choose another --run-dir");
     }
     run_id_ = FreshRunId(setup_.seed);
+    InitFrom();
     return;
   }
   if (present.empty()) {
     spdlog::warn("learner: --resume but no checkpoint in {}; starting a new run", store_.dir());
     run_id_ = FreshRunId(setup_.seed);
+    InitFrom();
     return;
   }
   auto accept = [&](const proto::Checkpoint& c) {
@@ -139,6 +142,27 @@ void LearnerService::Resume() {
   last_checkpoint_update_ = static_cast<int64_t>(counters_.updates());
   spdlog::info("learner: resumed from {} (update {}, {} samples)", resumed_from_,
                counters_.updates(), counters_.samples());
+}
+
+void LearnerService::InitFrom() {
+  if (setup_.cluster.init_from.empty()) return;
+  const std::string path = ResolveProjectPath(setup_.cluster.init_from);
+  const std::string ctx = "cluster.init_from " + path;
+  proto::Checkpoint c;
+  try {
+    c = ReadCheckpointFile(path);
+  } catch (const CheckpointError& e) {
+    throw ConfigError(ctx + ": " + e.what());
+  }
+  if (!c.has_trainer() || !c.trainer().has_model()) {
+    throw ConfigError(ctx + ": holds no trained policy");
+  }
+  // Weights and normalizer only; the new run counts its own updates from 0.
+  proto::ModelWeights w = c.trainer().model();
+  w.set_version(0);
+  ppo_->ImportWeights(w, ctx);  // ConfigError on another network shape or observation size
+  spdlog::info("learner: new run initialised from {} (update {}, {} samples of training)", path,
+               c.counters().updates(), c.counters().samples());
 }
 
 std::string LearnerService::SaveCheckpoint() {

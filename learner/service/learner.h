@@ -84,6 +84,7 @@ class LearnerService {
   void UpdateGauges();
   int ActorsAlive() const;
   void Resume();
+  void InitFrom();  // cluster.init_from, for a new run
 
   LearnerSetup setup_;
   LearnerOptions options_;

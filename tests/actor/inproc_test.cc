@@ -3,11 +3,14 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <fstream>
+#include <iterator>
 #include <thread>
 #include <zmq.hpp>
 
 #include "actor/actor.h"
 #include "actor/experiment.h"
+#include "common/proto/model.pb.h"
 #include "learner/service/learner.h"
 #include "tests/actor/cluster_fixture.h"
 
@@ -23,9 +26,7 @@ struct InprocRun {
   uint64_t learner_updates = 0;
 };
 
-InprocRun RunInproc(const std::string& tag, int updates, int num_actors) {
-  const Json j = MockConfig();
-  const ExperimentConfig cfg = ExperimentConfigFromJson(j, "inproc");
+LearnerSetup MakeLearnerSetup(const ExperimentConfig& cfg) {
   std::unique_ptr<Env> env = MakeExperimentEnv(cfg);
   LearnerSetup ls;
   ls.seed = cfg.seed;
@@ -34,12 +35,26 @@ InprocRun RunInproc(const std::string& tag, int updates, int num_actors) {
   ls.cluster = cfg.cluster;
   ls.resolved_config = ToJson(cfg);
   ls.compat_key = CompatKey(cfg, ls.policy);
+  return ls;
+}
+
+LearnerOptions InprocOptions(const std::string& tag, const std::string& run_dir) {
   LearnerOptions lo;
   lo.rollout_bind = "inproc://rollouts-" + tag;
   lo.weights_bind = "inproc://weights-" + tag;
   lo.metrics_port = -1;
-  lo.run_dir = TempDir("inproc") + "/run";
+  lo.run_dir = run_dir;
+  return lo;
+}
+
+InprocRun RunInproc(const std::string& tag, int updates, int num_actors,
+                    std::string* run_dir_out = nullptr) {
+  const Json j = MockConfig();
+  const ExperimentConfig cfg = ExperimentConfigFromJson(j, "inproc");
+  const LearnerSetup ls = MakeLearnerSetup(cfg);
+  LearnerOptions lo = InprocOptions(tag, TempDir("inproc") + "/run");
   lo.max_updates = updates;
+  if (run_dir_out) *run_dir_out = lo.run_dir;
   zmq::context_t ctx(1);
   // inproc: bind before connect.
   LearnerService learner(ctx, ls, lo);
@@ -95,6 +110,89 @@ TEST(InprocTest, LearnerAndTwoActorsInOneProcessLearnTheMockTask) {
     return n ? s / n : 0.0;
   };
   EXPECT_GT(mean_return(25, 30), mean_return(0, 5) + 2.0);
+}
+
+// Fine-tuning (walk stage 2 from stage 1): a new run takes the policy weights and normalizer of
+// another run's checkpoint, and counts its own updates from 0 with a fresh optimizer.
+TEST(InprocTest, NewRunStartsFromInitFromCheckpointWeights) {
+  std::string src_dir;
+  const InprocRun src = RunInproc("init-src", 6, 1, &src_dir);
+  ASSERT_EQ(src.learner_updates, 6u);
+  const std::string src_ckpt = src_dir + "/checkpoints/ckpt-0000000006.bin";
+  const proto::Checkpoint source = ReadCheckpointFile(src_ckpt);
+  ASSERT_GT(source.trainer().adam().step(), 0);
+
+  Json j = MockConfig(Json{{"init_from", src_ckpt}});
+  const ExperimentConfig cfg = ExperimentConfigFromJson(j, "init");
+  EXPECT_EQ(cfg.cluster.init_from, src_ckpt);
+  zmq::context_t ctx(1);
+  const std::string dst_dir = TempDir("init-dst") + "/run";
+  std::string saved;
+  {
+    LearnerService learner(ctx, MakeLearnerSetup(cfg), InprocOptions("init-dst", dst_dir));
+    EXPECT_EQ(learner.version(), 0u);
+    EXPECT_EQ(learner.counters().updates(), 0u);
+    saved = learner.SaveCheckpoint();
+  }
+  const proto::Checkpoint fresh = ReadCheckpointFile(saved);
+  const proto::ModelWeights& a = source.trainer().model();
+  const proto::ModelWeights& b = fresh.trainer().model();
+  ASSERT_EQ(a.params_size(), b.params_size());
+  for (int i = 0; i < a.params_size(); ++i) ASSERT_EQ(a.params(i), b.params(i)) << i;
+  ASSERT_EQ(a.obs_stats().mean_size(), b.obs_stats().mean_size());
+  EXPECT_EQ(a.obs_stats().count(), b.obs_stats().count());
+  for (int i = 0; i < a.obs_stats().mean_size(); ++i) {
+    EXPECT_EQ(a.obs_stats().mean(i), b.obs_stats().mean(i));
+  }
+  EXPECT_EQ(fresh.trainer().adam().step(), 0);
+  EXPECT_EQ(fresh.trainer().num_updates(), 0);
+  EXPECT_EQ(fresh.counters().samples(), 0u);
+  // The config that made the run records where it started.
+  EXPECT_EQ(LoadJsonFile(dst_dir + "/config.json")["cluster"]["init_from"], src_ckpt);
+
+  // Without init_from a new run starts elsewhere (the weights above were not a coincidence).
+  const ExperimentConfig scratch = ExperimentConfigFromJson(MockConfig(), "scratch");
+  {
+    LearnerService learner(ctx, MakeLearnerSetup(scratch),
+                           InprocOptions("init-scratch", TempDir("init-scratch") + "/run"));
+    const proto::Checkpoint c = ReadCheckpointFile(learner.SaveCheckpoint());
+    int same = 0;
+    for (int i = 0; i < a.params_size(); ++i) same += c.trainer().model().params(i) == a.params(i);
+    EXPECT_LT(same, a.params_size());
+  }
+}
+
+TEST(InprocTest, InitFromRefusesMissingCorruptOrMismatchedCheckpoints) {
+  std::string src_dir;
+  RunInproc("init-bad-src", 2, 1, &src_dir);
+  const std::string src_ckpt = src_dir + "/checkpoints/ckpt-0000000002.bin";
+  zmq::context_t ctx(1);
+  auto expect_refused = [&](const Json& cluster, const std::string& tag,
+                            const std::string& needle) {
+    const ExperimentConfig cfg = ExperimentConfigFromJson(MockConfig(cluster), tag);
+    LearnerSetup ls = MakeLearnerSetup(cfg);
+    if (tag == "shape") ls.policy.policy_net.hidden = {32};
+    try {
+      LearnerService learner(ctx, ls, InprocOptions(tag, TempDir(tag) + "/run"));
+      ADD_FAILURE() << tag << ": accepted";
+    } catch (const ConfigError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("cluster.init_from"), std::string::npos) << what;
+      EXPECT_NE(what.find(needle), std::string::npos) << what;
+    }
+  };
+  expect_refused(Json{{"init_from", src_dir + "/nope.bin"}}, "missing", "nope.bin");
+  const std::string corrupt = TempDir("init-corrupt") + "/ckpt.bin";
+  {
+    std::ifstream in(src_ckpt, std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    bytes[bytes.size() / 2] ^= 0x5a;
+    std::ofstream(corrupt, std::ios::binary) << bytes;
+  }
+  expect_refused(Json{{"init_from", corrupt}}, "corrupt", "ckpt.bin");
+  expect_refused(Json{{"init_from", src_ckpt}}, "shape", "ckpt-0000000002.bin");
+  // The source run is untouched.
+  EXPECT_EQ(ReadCheckpointFile(src_ckpt).counters().updates(), 2u);
 }
 
 }  // namespace
