@@ -17,7 +17,7 @@ namespace {
 // Task config: the file's when given, else the task's defaults; then the command-line overrides.
 TaskEnvConfig ResolveConfig(const std::string& task, const std::string& config_path,
                             const std::string& stage, const std::string& variant,
-                            const std::string& action_mode) {
+                            const std::string& action_mode, const std::string& start = "") {
   TaskEnvConfig c =
       config_path.empty() ? TaskEnvConfig::Defaults(task) : TaskEnvConfig::Load(config_path);
   if (c.env.task != task) {
@@ -36,6 +36,8 @@ TaskEnvConfig ResolveConfig(const std::string& task, const std::string& config_p
     w["reward_variant"] = variant;
   }
   if (!action_mode.empty()) j["action_mode"] = action_mode;
+  if (start == "reference") j["walk"]["reference_state_init"] = true;
+  if (start == "fixed") j["walk"]["reference_state_init"] = false;
   return TaskEnvConfig::FromJson(j, config_path.empty() ? "--task " + task : config_path);
 }
 
@@ -43,7 +45,7 @@ TaskEnvConfig ResolveConfig(const std::string& task, const std::string& config_p
 
 void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   struct EvalOpts {
-    std::string task = "walk", model, config, stage, variant, action_mode, filmstrip;
+    std::string task = "walk", model, config, stage, variant, action_mode, filmstrip, start;
     WalkEvalOptions eval;
     int frames = 6;
     int panel_px = 220;
@@ -58,7 +60,13 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "policy file: serialized perch.proto.ModelWeights or LearnerState, or a PERCHCKP "
                   "cluster checkpoint")
       ->required();
-  cmd->add_option("--config", o->config, "task env config JSON (default: the task's defaults)");
+  cmd->add_option("--config", o->config,
+                  "task env config JSON, or an experiment / run config.json (its env section); "
+                  "default: the task's defaults");
+  cmd->add_option("--start", o->start,
+                  "episode start override: fixed (the config's initial pose) or reference (a "
+                  "random phase of the reference motion, the stage-1 training distribution)")
+      ->check(CLI::IsMember({"fixed", "reference"}));
   cmd->add_option("--stage", o->stage, "walk stage override")
       ->check(CLI::IsMember({"forward", "target"}));
   cmd->add_option("--reward-variant", o->variant, "reward preset override")
@@ -81,7 +89,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   cmd->add_flag("--json", o->json, "print one JSON object on stdout");
   cmd->callback([o]() {
     const TaskEnvConfig config =
-        ResolveConfig(o->task, o->config, o->stage, o->variant, o->action_mode);
+        ResolveConfig(o->task, o->config, o->stage, o->variant, o->action_mode, o->start);
     const proto::ModelWeights weights = LoadModelFile(o->model);
     WalkEvalRecording rec;
     std::cerr << "eval: " << o->model << " (version " << weights.version() << "), "

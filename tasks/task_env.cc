@@ -23,7 +23,12 @@ TaskEnvConfig TaskEnvConfig::FromJson(const Json& j, const std::string& ctx) {
 }
 
 TaskEnvConfig TaskEnvConfig::Load(const std::string& path) {
-  return FromJson(LoadJsonFile(path), path);
+  const Json j = LoadJsonFile(path);
+  // An experiment config (configs/default.json, a run's config.json) carries the env in "env".
+  if (j.is_object() && j.contains("env") && j["env"].is_object()) {
+    return FromJson(j["env"], path + ": env");
+  }
+  return FromJson(j, path);
 }
 
 Json TaskEnvConfig::ToJson() const {

@@ -23,6 +23,7 @@ struct TaskEnvConfig {
   static TaskEnvConfig Defaults(const std::string& task);
   // Strict, like EnvConfig::FromJson; a "walk" section is read with the walk preset rules.
   static TaskEnvConfig FromJson(const Json& j, const std::string& ctx);
+  // A task env config file, or an experiment config / run config.json (its "env" section).
   static TaskEnvConfig Load(const std::string& path);
   Json ToJson() const;  // env fields + "walk"
 };

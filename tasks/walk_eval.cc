@@ -8,6 +8,7 @@
 
 #include "common/proto/wire.pb.h"
 #include "common/rng.h"
+#include "tasks/foot_sliding.h"
 
 namespace perch {
 namespace {
@@ -132,32 +133,14 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
   runner.LoadWeights(weights);
   runner.set_update_obs_stats(false);  // evaluation must not move the normaliser
 
-  // Toe of each foot: the foot capsule end point farthest forward (body +x), and its radius.
-  const HumanoidModel& model = env->model();
-  struct Toe {
-    int body;
-    Eigen::Vector3d local;
-    double radius;
-  };
-  std::vector<Toe> toes;
-  for (int b : model.foot_bodies()) {
-    Toe t{b, Eigen::Vector3d::Zero(), 0.0};
-    double best = -1e9;
-    for (const Geom& g : model.body(b).geoms) {
-      for (const Eigen::Vector3d& p : {g.from, g.to}) {
-        if (p.x() > best) best = p.x(), t.local = p, t.radius = g.radius;
-      }
-    }
-    toes.push_back(t);
-  }
+  FootSlidingMeter sliding_meter(env->model(), o.foot_sliding);
+  auto body_pose = [&](int b) { return env->world().BodyPose(b); };
 
   const bool target_mode = config.walk.stage == WalkStage::kTarget;
   std::vector<float> obs(spec.obs_dim), next(spec.obs_dim), action(spec.act_dim);
   int no_fall = 0, falls = 0, invalid = 0, targets = 0;
   int64_t steps_total = 0;
   double sum_return = 0, sum_sim = 0, sum_heading = 0, sum_forward = 0;
-  double slide_speed_sum = 0;
-  int64_t near_ground = 0, sliding = 0;
   for (int e = 0; e < o.episodes; ++e) {
     // Episode e depends only on (seed, e): any subset of episodes can be rerun alone.
     // (Rng::Seed scrambles its seed, so nearby integers give unrelated streams.)
@@ -166,8 +149,7 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
     Rng act_rng(2 * episode_seed + 1);
     env->Reset(obs.data());
     const double x0 = env->humanoid_state().root_pos.x();
-    std::vector<Eigen::Vector3d> prev_toe;
-    for (const Toe& t : toes) prev_toe.push_back(env->world().BodyPose(t.body) * t.local);
+    sliding_meter.Start(body_pose);
     auto record = [&](int step) {
       if (e != 0 || rec == nullptr) return;
       const HumanoidState& s = env->humanoid_state();
@@ -200,16 +182,7 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
           const double err = AngleDiff(std::atan2(to.y(), to.x()), env->RootRpy().z());
           sum_heading += std::abs(err) * 180.0 / M_PI;
         }
-        for (size_t i = 0; i < toes.size(); ++i) {
-          const Eigen::Vector3d p = env->world().BodyPose(toes[i].body) * toes[i].local;
-          if (p.z() - toes[i].radius < o.toe_height_m) {
-            const double v = (p - prev_toe[i]).head<2>().norm() / dt;
-            slide_speed_sum += v;
-            ++near_ground;
-            if (v > o.slide_speed_mps) ++sliding;
-          }
-          prev_toe[i] = p;
-        }
+        sliding_meter.Observe(body_pose, dt);
       }
       record(steps);
       obs.swap(next);
@@ -243,12 +216,13 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
          {"mean_reward", sum_return / static_cast<double>(steps_total)},
          {"mean_imitation_reward", sum_sim / static_cast<double>(steps_total)},
          {"mean_forward_speed_mps", sum_forward / n},
-         {"foot_sliding",
-          {{"toe_height_m", o.toe_height_m},
-           {"slide_speed_mps", o.slide_speed_mps},
-           {"mean_toe_speed_mps", near_ground ? slide_speed_sum / near_ground : 0.0},
-           {"sliding_fraction", near_ground ? static_cast<double>(sliding) / near_ground : 0.0},
-           {"sliding_count_per_s", sliding / secs}}}};
+         {"foot_sliding", sliding_meter.ToJson(secs)}};
+  // The same meter on the imitated clip over the mean episode length: sliding a clean reference
+  // walk itself scores (the swing foot counts while it is low).
+  const double ref_s = std::max(dt, secs / n);
+  const FootSlidingMeter ref = ReferenceFootSliding(
+      env->model(), ReferenceMotion::Load(config.walk.MotionPath()), ref_s, dt, o.foot_sliding);
+  j["foot_sliding"]["reference"] = ref.ToJson(ref_s);
   if (target_mode) {
     j["targets_reached"] = targets;
     j["targets_reached_per_min"] = targets / (secs / 60.0);

@@ -9,6 +9,7 @@
 #include "common/json_util.h"
 #include "common/proto/model.pb.h"
 #include "learner/policy.h"
+#include "tasks/foot_sliding.h"
 #include "tasks/task_env.h"
 #include "viz/filmstrip.h"
 
@@ -26,8 +27,7 @@ struct WalkEvalOptions {
   uint64_t seed = 0;
   bool stochastic = false;         // default: the Gaussian's mean
   double no_fall_s = 10.0;         // an episode counts as no-fall if it stays up this long [s]
-  double toe_height_m = 0.07;      // DAFNet: toe within 7 cm of the ground ...
-  double slide_speed_mps = 0.004;  // ... and moving faster than 0.4 cm/s: sliding
+  FootSlidingOptions foot_sliding;
 };
 
 // Episode 0, for the filmstrip.

@@ -135,8 +135,11 @@ Canvas RenderFilmstrip(const HumanoidModel& model, const Chair* chair,
     lo = lo.cwiseMin(t);
     hi = hi.cwiseMax(t);
   }
+  // Following: a humanoid-sized window, so the gait stays readable on long episodes (the fixed
+  // window is the overview of the whole path).
   const double extent =
-      std::max(options.min_extent_m, (hi - lo).maxCoeff() + 2.0 * options.margin_m);
+      options.follow ? options.min_extent_m
+                     : std::max(options.min_extent_m, (hi - lo).maxCoeff() + 2.0 * options.margin_m);
   const double scale = px / extent;
   const Eigen::Vector2d centre = 0.5 * (lo + hi);
 

@@ -179,6 +179,40 @@ TEST(EvalCommand, JsonAndFilmstripOfTheRightSize) {
   EXPECT_NE(err.find("perch: error: " + bad), std::string::npos) << err;
 }
 
+// A run's config.json (experiment config) works as --config: eval takes its env section, and
+// --start overrides how episodes begin.
+TEST(EvalCommand, ReadsTheEnvOfAnExperimentConfigAndOverridesTheStart) {
+  if (!std::getenv("PERCH_BIN")) GTEST_SKIP() << "PERCH_BIN not set";
+  const std::string model = Write("walk_cli_exp_w.bin", Untrained(6).SerializeAsString());
+  const Json exp{{"seed", 3},
+                 {"env",
+                  {{"task", "walk"},
+                   {"walk", {{"stage", "forward"}, {"reference_state_init", false},
+                             {"min_root_z", 0.7}}}}},
+                 {"cluster", {{"task", "walk"}}}};
+  const std::string cfg = Write("walk_cli_exp.json", exp.dump());
+  int rc = 0;
+  std::string err;
+  Json j = Json::parse(
+      RunPerch("eval --task walk --model " + model + " --config " + cfg + " --episodes 1 --json",
+               &rc, &err));
+  ASSERT_EQ(rc, 0) << err;
+  EXPECT_EQ(j["config"]["walk"]["min_root_z"], 0.7);  // from the file's env section
+  EXPECT_EQ(j["config"]["walk"]["reference_state_init"], false);
+  j = Json::parse(RunPerch("eval --task walk --model " + model + " --config " + cfg +
+                               " --start reference --episodes 1 --json",
+                           &rc, &err));
+  ASSERT_EQ(rc, 0) << err;
+  EXPECT_EQ(j["config"]["walk"]["reference_state_init"], true);
+  // An unknown field in the env section is named, as for a plain task config.
+  Json bad = exp;
+  bad["env"]["walk"]["min_rootz"] = 0.7;
+  const std::string bad_cfg = Write("walk_cli_exp_bad.json", bad.dump());
+  RunPerch("eval --task walk --model " + model + " --config " + bad_cfg + " --json", &rc, &err);
+  EXPECT_EQ(rc, 2);
+  EXPECT_NE(err.find("min_rootz"), std::string::npos) << err;
+}
+
 TEST(EvalCommand, TrainLocalWritesWeightsThatEvalReads) {
   if (!std::getenv("PERCH_BIN")) GTEST_SKIP() << "PERCH_BIN not set";
   const std::string dir = ::testing::TempDir() + "/walk_train_local";

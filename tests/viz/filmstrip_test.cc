@@ -90,6 +90,30 @@ TEST(Filmstrip, FarWalkTargetIsInsideTheFixedWindow) {
   EXPECT_GT(green, 10);
 }
 
+// A long episode (20 m of path) drawn following the humanoid keeps it humanoid-sized: each panel
+// is the same picture as the same pose alone.
+TEST(Filmstrip, FollowingKeepsTheHumanoidLargeOnLongPaths) {
+  const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
+  FilmstripOptions opt;
+  opt.panel_px = 120;
+  opt.follow = true;
+  const Canvas alone =
+      RenderFilmstrip(model, nullptr, Eigen::Isometry3d::Identity(), {Standing(20, 0)}, opt);
+  const Canvas path = RenderFilmstrip(model, nullptr, Eigen::Isometry3d::Identity(),
+                                      {Standing(0, 0), Standing(20, 0)}, opt);
+  ASSERT_EQ(path.width(), 240);
+  int torso = 0;
+  for (int y = 0; y < alone.height(); ++y) {
+    for (int x = 0; x < alone.width(); ++x) {
+      torso += alone.at(x, y) == kCentre;
+      if (x == 0) continue;  // the panel separator
+      ASSERT_EQ(path.at(120 + x, y), alone.at(x, y)) << x << "," << y;
+    }
+  }
+  // And at the default 2.2 m window the torso covers a visible area (not a few pixels).
+  EXPECT_GT(torso, 40);
+}
+
 TEST(Canvas, PngRoundTripAndFailedSaveLeavesNothing) {
   Canvas c(17, 9, Rgb{1, 2, 3});
   c.FillCapsule(Eigen::Vector2d(2, 2), Eigen::Vector2d(14, 6), 2.0, Rgb{200, 100, 50});
