@@ -26,6 +26,7 @@
 #include "app/commands.h"
 #include "learner/service/checkpoint.h"
 #include "learner/service/learner.h"
+#include "learner/service/run_summary.h"
 
 namespace perch {
 namespace {
@@ -556,6 +557,32 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   b->callback([bf] {
     const int rc = RunBenchCluster(*bf);
     if (rc != 0) throw CLI::RuntimeError(rc);
+  });
+
+  // perch run-summary
+  struct SummaryFlags {
+    std::string run_dir, csv;
+    bool json = false;
+  };
+  auto sf = std::make_shared<SummaryFlags>();
+  CLI::App* s = root.add_subcommand(
+      "run-summary", "What a training run did: samples, wall time, throughput, learning curve");
+  s->add_option("--run-dir", sf->run_dir, "the run directory (metrics.jsonl)")->required();
+  s->add_option("--csv", sf->csv, "write the learning curve here as CSV");
+  s->add_flag("--json", sf->json, "print one JSON object");
+  s->callback([sf] {
+    const RunSummary summary = SummarizeRun(sf->run_dir);
+    if (!sf->csv.empty()) WriteCurveCsv(summary, sf->csv);
+    Json j = ToJson(summary);
+    if (!sf->csv.empty()) j["csv"] = sf->csv;
+    if (sf->json) {
+      std::cout << j.dump() << "\n";
+    } else {
+      std::cout << "updates " << summary.updates << ", samples " << summary.samples
+                << ", wall time " << summary.wall_time_s << " s, "
+                << j["samples_per_s"].get<double>() << " samples/s, up to " << summary.max_actors
+                << " actors\n";
+    }
   });
 }
 
