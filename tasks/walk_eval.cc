@@ -138,7 +138,7 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
 
   const bool target_mode = config.walk.stage == WalkStage::kTarget;
   std::vector<float> obs(spec.obs_dim), next(spec.obs_dim), action(spec.act_dim);
-  int no_fall = 0, falls = 0, invalid = 0, targets = 0;
+  int no_fall = 0, falls = 0, invalid = 0, targets = 0, targets_missed = 0;
   int64_t steps_total = 0;
   double sum_return = 0, sum_sim = 0, sum_heading = 0, sum_forward = 0;
   for (int e = 0; e < o.episodes; ++e) {
@@ -177,6 +177,7 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
         const WalkTerms& t = task.last_terms();
         sum_sim += t.similarity;
         if (t.target_reached) ++targets;
+        if (t.target_redrawn && !t.target_reached) ++targets_missed;  // its 2.5 s ran out
         if (target_mode) {
           const Eigen::Vector2d to = env->walk_target() - env->BodyXyz().head<2>();
           const double err = AngleDiff(std::atan2(to.y(), to.x()), env->RootRpy().z());
@@ -226,6 +227,10 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
   if (target_mode) {
     j["targets_reached"] = targets;
     j["targets_reached_per_min"] = targets / (secs / 60.0);
+    // Of the targets that were reached or ran out of time (not the one open at episode end).
+    j["targets_missed"] = targets_missed;
+    j["target_reach_fraction"] =
+        targets + targets_missed ? static_cast<double>(targets) / (targets + targets_missed) : 0.0;
     j["mean_heading_error_deg"] = sum_heading / static_cast<double>(steps_total);
   }
   return j;

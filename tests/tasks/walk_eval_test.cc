@@ -63,6 +63,30 @@ TEST(WalkEval, WellFormedAndReproducible) {
   EXPECT_FALSE(EvaluateWalk(c, w, o, nullptr).contains("targets_reached_per_min"));
 }
 
+// Reach fraction at its two ends: targets reached on the spot (reach radius larger than their
+// distance) and targets that always time out (one step to reach a point 1 cm wide).
+TEST(WalkEval, TargetReachFractionCountsReachedAgainstTimedOut) {
+  TaskEnvConfig c = TaskEnvConfig::Defaults("walk");
+  c.walk.stage = WalkStage::kTarget;
+  c.walk.min_root_z = -10.0;  // no falls: every episode runs to the time limit
+  c.walk.max_episode_steps = 60;
+  const proto::ModelWeights w = Untrained(2);
+  WalkEvalOptions o;
+  o.episodes = 1;
+  o.no_fall_s = 1.0;
+  c.walk.target_reach_m = 100.0;
+  Json j = EvaluateWalk(c, w, o, nullptr);
+  EXPECT_GT(j["targets_reached"].get<int>(), 50);
+  EXPECT_EQ(j["targets_missed"], 0);
+  EXPECT_EQ(j["target_reach_fraction"], 1.0);
+  c.walk.target_reach_m = 0.01;
+  c.walk.target_redraw_s = 1.0 / 60.0;
+  j = EvaluateWalk(c, w, o, nullptr);
+  EXPECT_EQ(j["targets_reached"], 0);
+  EXPECT_GT(j["targets_missed"].get<int>(), 50);
+  EXPECT_EQ(j["target_reach_fraction"], 0.0);
+}
+
 TEST(WalkEval, ReadsWeightsAndLearnerStateAndRefusesCorruptFiles) {
   const proto::ModelWeights w = Untrained(2);
   const std::string wpath = Write("walk_w.bin", w.SerializeAsString());
