@@ -23,6 +23,7 @@
 #include "actor/actor.h"
 #include "actor/experiment.h"
 #include "actor/process.h"
+#include "actor/role_setup.h"
 #include "app/commands.h"
 #include "learner/service/checkpoint.h"
 #include "learner/service/learner.h"
@@ -58,29 +59,6 @@ uint32_t HostnameHash() {
   uint32_t h = 2166136261u;  // FNV-1a: stable across restarts of the same pod
   for (const char* p = host; *p; ++p) h = (h ^ static_cast<unsigned char>(*p)) * 16777619u;
   return h & 0x7fffffff;
-}
-
-LearnerSetup MakeLearnerSetup(const ExperimentConfig& cfg) {
-  std::unique_ptr<Env> env = MakeExperimentEnv(cfg);
-  LearnerSetup s;
-  s.seed = cfg.seed;
-  s.policy = ResolvePolicyConfig(cfg, env->spec());
-  s.ppo = cfg.ppo;
-  s.cluster = cfg.cluster;
-  s.resolved_config = ToJson(cfg);
-  s.compat_key = CompatKey(cfg, s.policy);
-  return s;
-}
-
-ActorSetup MakeActorSetup(const ExperimentConfig& cfg) {
-  std::unique_ptr<Env> env = MakeExperimentEnv(cfg);
-  ActorSetup s;
-  s.seed = cfg.seed;
-  s.policy = ResolvePolicyConfig(cfg, env->spec());
-  s.obs_norm = cfg.ppo.obs_norm;
-  s.cluster = cfg.cluster;
-  s.make_env = [cfg] { return MakeExperimentEnv(cfg); };
-  return s;
 }
 
 // ---- perch learner ----

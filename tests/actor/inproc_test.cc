@@ -10,6 +10,7 @@
 
 #include "actor/actor.h"
 #include "actor/experiment.h"
+#include "actor/role_setup.h"
 #include "common/proto/model.pb.h"
 #include "learner/service/learner.h"
 #include "tests/actor/cluster_fixture.h"
@@ -25,18 +26,6 @@ struct InprocRun {
   uint64_t actor_weights_loaded = 0;
   uint64_t learner_updates = 0;
 };
-
-LearnerSetup MakeLearnerSetup(const ExperimentConfig& cfg) {
-  std::unique_ptr<Env> env = MakeExperimentEnv(cfg);
-  LearnerSetup ls;
-  ls.seed = cfg.seed;
-  ls.policy = ResolvePolicyConfig(cfg, env->spec());
-  ls.ppo = cfg.ppo;
-  ls.cluster = cfg.cluster;
-  ls.resolved_config = ToJson(cfg);
-  ls.compat_key = CompatKey(cfg, ls.policy);
-  return ls;
-}
 
 LearnerOptions InprocOptions(const std::string& tag, const std::string& run_dir) {
   LearnerOptions lo;
@@ -61,12 +50,7 @@ InprocRun RunInproc(const std::string& tag, int updates, int num_actors,
   std::atomic<bool> stop_actors{false};
   std::vector<std::unique_ptr<ActorService>> actors;
   for (int i = 0; i < num_actors; ++i) {
-    ActorSetup as;
-    as.seed = cfg.seed;
-    as.policy = ls.policy;
-    as.obs_norm = cfg.ppo.obs_norm;
-    as.cluster = cfg.cluster;
-    as.make_env = [cfg] { return MakeExperimentEnv(cfg); };
+    const ActorSetup as = MakeActorSetup(cfg);
     ActorOptions ao;
     ao.rollout_connect = lo.rollout_bind;
     ao.weights_connect = lo.weights_bind;
