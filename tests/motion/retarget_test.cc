@@ -1,11 +1,13 @@
 #include "motion/retarget.h"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <string>
 
 #include "envs/humanoid_model.h"
 
@@ -235,7 +237,10 @@ namespace {
 
 std::string RunPerch(const std::string& args, int* rc) {
   const char* bin = std::getenv("PERCH_BIN");
-  const std::string out = ::testing::TempDir() + "/perch_motion_out.txt";
+  // Tests run in parallel processes: one capture file per test and pid.
+  const std::string out = ::testing::TempDir() + "/perch_motion_out_" +
+                          ::testing::UnitTest::GetInstance()->current_test_info()->name() + "_" +
+                          std::to_string(::getpid()) + ".txt";
   *rc = WEXITSTATUS(
       std::system((std::string(bin) + " " + args + " >" + out + " 2>/dev/null").c_str()));
   std::ifstream in(out);

@@ -1,11 +1,13 @@
 #include "tasks/walk_eval.h"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <string>
 
 #include "common/proto/model.pb.h"
 #include "common/proto/wire.pb.h"
@@ -166,8 +168,13 @@ TEST(WalkEval, ReadsClusterCheckpointsAndRefusesDamagedOnes) {
 }
 
 std::string RunPerch(const std::string& args, int* rc, std::string* err) {
-  const std::string out = ::testing::TempDir() + "/walk_cli_out.txt";
-  const std::string errp = ::testing::TempDir() + "/walk_cli_err.txt";
+  // CTest runs each test in its own process, in parallel: the capture files carry the test's name
+  // and pid so that concurrent tests never read each other's output.
+  const std::string tag =
+      std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + "_" +
+      std::to_string(::getpid());
+  const std::string out = ::testing::TempDir() + "/walk_cli_out_" + tag + ".txt";
+  const std::string errp = ::testing::TempDir() + "/walk_cli_err_" + tag + ".txt";
   *rc = WEXITSTATUS(std::system(
       (std::string(std::getenv("PERCH_BIN")) + " " + args + " >" + out + " 2>" + errp).c_str()));
   std::stringstream a, b;
@@ -208,12 +215,12 @@ TEST(EvalCommand, JsonAndFilmstripOfTheRightSize) {
 TEST(EvalCommand, ReadsTheEnvOfAnExperimentConfigAndOverridesTheStart) {
   if (!std::getenv("PERCH_BIN")) GTEST_SKIP() << "PERCH_BIN not set";
   const std::string model = Write("walk_cli_exp_w.bin", Untrained(6).SerializeAsString());
-  const Json exp{{"seed", 3},
-                 {"env",
-                  {{"task", "walk"},
-                   {"walk", {{"stage", "forward"}, {"reference_state_init", false},
-                             {"min_root_z", 0.7}}}}},
-                 {"cluster", {{"task", "walk"}}}};
+  const Json exp{
+      {"seed", 3},
+      {"env",
+       {{"task", "walk"},
+        {"walk", {{"stage", "forward"}, {"reference_state_init", false}, {"min_root_z", 0.7}}}}},
+      {"cluster", {{"task", "walk"}}}};
   const std::string cfg = Write("walk_cli_exp.json", exp.dump());
   int rc = 0;
   std::string err;
