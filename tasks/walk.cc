@@ -159,6 +159,7 @@ void WalkTask::DrawTarget(HumanoidChairEnv& env, Rng& rng) {
   const double dist = rng.Uniform(c_.target_min_dist_m, c_.target_max_dist_m);
   const Eigen::Vector2d dir = Eigen::Rotation2Dd(theta) * heading;
   env.SetWalkTarget(s.root_pos.head<2>() + dist * dir);
+  target_drawn_dist_m_ = dist;
   countdown_ = redraw_steps_;
 }
 

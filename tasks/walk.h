@@ -90,6 +90,8 @@ class WalkTask : public Task {
   double start_time() const { return t0_; }  // reference time at step 0 [s]
   const WalkTerms& last_terms() const { return terms_; }
   int targets_reached() const { return targets_reached_; }  // this episode
+  // The current target's distance from the root when it was drawn [m] (target stage).
+  double target_drawn_distance_m() const { return target_drawn_dist_m_; }
   // Horizontal distance body_xyz -> walk target [m].
   static double TargetDistance(const HumanoidChairEnv& env);
 
@@ -106,6 +108,7 @@ class WalkTask : public Task {
   double prev_distance_ = 0.0;
   bool redrawn_ = false, reached_ = false;
   int targets_reached_ = 0;
+  double target_drawn_dist_m_ = 0.0;
   std::array<double, HumanoidModel::kNumJoints> prev_q_{};
   Eigen::Vector3d prev_root_ = Eigen::Vector3d::Zero();
   WalkTerms terms_;

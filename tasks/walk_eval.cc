@@ -1,6 +1,7 @@
 #include "tasks/walk_eval.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -141,6 +142,13 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
   int no_fall = 0, falls = 0, invalid = 0, targets = 0, targets_missed = 0;
   int64_t steps_total = 0;
   double sum_return = 0, sum_sim = 0, sum_heading = 0, sum_forward = 0;
+  // Where falls happen, to tell a balance problem from a steering one: the episode time, the time
+  // since the current target was drawn and the heading error to it at the falling step.
+  Json fall_times = Json::array(), fall_since_target = Json::array(), fall_heading = Json::array();
+  // Reached / resolved targets by their distance when drawn, bins of 1 m from 0 m: a target farther
+  // than the walking speed times the re-draw time cannot be reached at all (docs/walk.md).
+  constexpr int kDistBins = 6;
+  std::array<int, kDistBins> bin_reached{}, bin_resolved{};
   for (int e = 0; e < o.episodes; ++e) {
     // Episode e depends only on (seed, e): any subset of episodes can be rerun alone.
     // (Rng::Seed scrambles its seed, so nearby integers give unrelated streams.)
@@ -149,6 +157,11 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
     Rng act_rng(2 * episode_seed + 1);
     env->Reset(obs.data());
     const double x0 = env->humanoid_state().root_pos.x();
+    auto target_bin = [&] {
+      const double d = task.target_drawn_distance_m();
+      return std::clamp(static_cast<int>(d), 0, kDistBins - 1);
+    };
+    int open_bin = target_bin();
     sliding_meter.Start(body_pose);
     auto record = [&](int step) {
       if (e != 0 || rec == nullptr) return;
@@ -165,7 +178,8 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
       }
     };
     record(0);
-    int steps = 0;
+    int steps = 0, target_drawn_step = 0;
+    double heading_err_deg = 0.0;
     bool fell = false;
     for (;;) {
       runner.Act(obs.data(), act_rng, !o.stochastic, nullptr, action.data());
@@ -178,10 +192,17 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
         sum_sim += t.similarity;
         if (t.target_reached) ++targets;
         if (t.target_redrawn && !t.target_reached) ++targets_missed;  // its 2.5 s ran out
+        if (t.target_redrawn) {
+          ++bin_resolved[open_bin];
+          if (t.target_reached) ++bin_reached[open_bin];
+          open_bin = target_bin();
+          target_drawn_step = steps;
+        }
         if (target_mode) {
           const Eigen::Vector2d to = env->walk_target() - env->BodyXyz().head<2>();
           const double err = AngleDiff(std::atan2(to.y(), to.x()), env->RootRpy().z());
-          sum_heading += std::abs(err) * 180.0 / M_PI;
+          heading_err_deg = std::abs(err) * 180.0 / M_PI;
+          sum_heading += heading_err_deg;
         }
         sliding_meter.Observe(body_pose, dt);
       }
@@ -193,7 +214,14 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
       }
       if (r.truncated) break;
     }
-    if (fell) ++falls;
+    if (fell) {
+      ++falls;
+      fall_times.push_back(steps * dt);
+      if (target_mode) {
+        fall_since_target.push_back((steps - target_drawn_step) * dt);
+        fall_heading.push_back(heading_err_deg);
+      }
+    }
     if (!fell || steps >= no_fall_steps) ++no_fall;
     steps_total += steps;
     sum_forward += (env->humanoid_state().root_pos.x() - x0) / (steps * dt);
@@ -217,7 +245,8 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
          {"mean_reward", sum_return / static_cast<double>(steps_total)},
          {"mean_imitation_reward", sum_sim / static_cast<double>(steps_total)},
          {"mean_forward_speed_mps", sum_forward / n},
-         {"foot_sliding", sliding_meter.ToJson(secs)}};
+         {"foot_sliding", sliding_meter.ToJson(secs)},
+         {"fall_times_s", fall_times}};
   // The same meter on the imitated clip over the mean episode length: sliding a clean reference
   // walk itself scores (the swing foot counts while it is low).
   const double ref_s = std::max(dt, secs / n);
@@ -232,6 +261,19 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
     j["target_reach_fraction"] =
         targets + targets_missed ? static_cast<double>(targets) / (targets + targets_missed) : 0.0;
     j["mean_heading_error_deg"] = sum_heading / static_cast<double>(steps_total);
+    j["fall_seconds_since_target"] = fall_since_target;
+    Json by_dist = Json::array();
+    for (int b = 0; b < kDistBins; ++b) {
+      if (bin_resolved[b] == 0) continue;
+      by_dist.push_back(
+          {{"from_m", b},
+           {"to_m", b + 1 < kDistBins ? Json(b + 1) : Json(nullptr)},
+           {"resolved", bin_resolved[b]},
+           {"reached", bin_reached[b]},
+           {"reach_fraction", static_cast<double>(bin_reached[b]) / bin_resolved[b]}});
+    }
+    j["target_reach_by_distance"] = by_dist;
+    j["fall_heading_error_deg"] = fall_heading;
   }
   return j;
 }

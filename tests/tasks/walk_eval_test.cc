@@ -89,6 +89,67 @@ TEST(WalkEval, TargetReachFractionCountsReachedAgainstTimedOut) {
   EXPECT_EQ(j["target_reach_fraction"], 0.0);
 }
 
+// Resolved targets are binned by their distance when drawn; the bins add up to the totals.
+TEST(WalkEval, TargetReachByDistanceBinsEachResolvedTarget) {
+  TaskEnvConfig c = TaskEnvConfig::Defaults("walk");
+  c.walk.stage = WalkStage::kTarget;
+  c.walk.min_root_z = -10.0;
+  c.walk.max_episode_steps = 60;
+  const proto::ModelWeights w = Untrained(2);
+  WalkEvalOptions o;
+  o.episodes = 2;
+  o.no_fall_s = 1.0;
+  auto one_bin = [](const Json& j) {
+    EXPECT_EQ(j["target_reach_by_distance"].size(), 1u) << j["target_reach_by_distance"].dump();
+    return j["target_reach_by_distance"][0];
+  };
+  c.walk.target_min_dist_m = 1.4;  // all near, all reached
+  c.walk.target_max_dist_m = 1.6;
+  c.walk.target_reach_m = 100.0;
+  Json j = EvaluateWalk(c, w, o, nullptr);
+  Json b = one_bin(j);
+  EXPECT_EQ(b["from_m"], 1);
+  EXPECT_EQ(b["to_m"], 2);
+  EXPECT_EQ(b["resolved"], j["targets_reached"]);
+  EXPECT_EQ(b["reach_fraction"], 1.0);
+  c.walk.target_min_dist_m = 3.4;  // all far, all timed out
+  c.walk.target_max_dist_m = 3.6;
+  c.walk.target_reach_m = 0.01;
+  c.walk.target_redraw_s = 1.0 / 60.0;
+  j = EvaluateWalk(c, w, o, nullptr);
+  b = one_bin(j);
+  EXPECT_EQ(b["from_m"], 3);
+  EXPECT_EQ(b["resolved"], j["targets_missed"]);
+  EXPECT_EQ(b["reached"], 0);
+}
+
+// Each fall is listed with its time, and in target mode with the age of its target.
+TEST(WalkEval, FallsAreListedWithTheirTimeAndTargetAge) {
+  TaskEnvConfig c = TaskEnvConfig::Defaults("walk");
+  c.walk.stage = WalkStage::kTarget;
+  c.walk.max_episode_steps = 600;
+  WalkEvalOptions o;
+  o.episodes = 3;
+  o.no_fall_s = 10.0;
+  const Json j = EvaluateWalk(c, Untrained(4), o, nullptr);  // an untrained policy falls
+  const double dt = c.env.physics.physics_dt * c.env.physics.substeps;
+  ASSERT_EQ(j["fall_times_s"].size(), 3u);
+  ASSERT_EQ(j["fall_seconds_since_target"].size(), 3u);
+  ASSERT_EQ(j["fall_heading_error_deg"].size(), 3u);
+  double sum_t = 0;
+  for (int i = 0; i < 3; ++i) {
+    const double t = j["fall_times_s"][i].get<double>();
+    sum_t += t;
+    EXPECT_GT(t, 0.0);
+    const double age = j["fall_seconds_since_target"][i].get<double>();
+    EXPECT_GE(age, 0.0);
+    EXPECT_LE(age, std::min(t, c.walk.target_redraw_s) + 1e-9);
+    EXPECT_GE(j["fall_heading_error_deg"][i].get<double>(), 0.0);
+    EXPECT_LE(j["fall_heading_error_deg"][i].get<double>(), 180.0);
+  }
+  EXPECT_NEAR(sum_t / 3.0, j["mean_episode_steps"].get<double>() * dt, 1e-9);
+}
+
 TEST(WalkEval, ReadsWeightsAndLearnerStateAndRefusesCorruptFiles) {
   const proto::ModelWeights w = Untrained(2);
   const std::string wpath = Write("walk_w.bin", w.SerializeAsString());
