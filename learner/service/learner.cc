@@ -6,6 +6,8 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <numeric>
 
@@ -66,10 +68,39 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
   MakeDir(options_.run_dir);
   Resume();
 
-  // Every run (and every restart of it) records its resolved config and seed.
+  // Every run (and every restart of it) records its resolved config and seed. A resume with a
+  // changed config (say a lower learning rate for the last stretch) keeps the config the earlier
+  // updates were made with as config-to-<update>.json, so the run's history stays reproducible.
   Json record = setup_.resolved_config;
   record["seed"] = setup_.seed;
-  SaveJsonFileAtomic(options_.run_dir + "/config.json", record);
+  const std::string config_path = options_.run_dir + "/config.json";
+  if (!resumed_from_.empty() && std::filesystem::exists(config_path)) {
+    Json previous;
+    try {
+      previous = LoadJsonFile(config_path);
+    } catch (const ConfigError& e) {
+      previous = Json{{"unreadable", e.what()}};  // kept as it was, below
+    }
+    if (previous != record) {
+      char name[64];
+      std::snprintf(name, sizeof(name), "/config-to-%010llu.json",
+                    static_cast<unsigned long long>(counters_.updates()));
+      const std::string kept = options_.run_dir + name;
+      if (!std::filesystem::exists(kept)) std::filesystem::rename(config_path, kept);
+      std::vector<std::string> changed;
+      for (const auto& [key, value] : record.items()) {
+        if (!previous.contains(key) || previous[key] != value) changed.push_back(key);
+      }
+      for (const auto& [key, value] : previous.items()) {
+        if (!record.contains(key)) changed.push_back(key);
+      }
+      std::string list;
+      for (const auto& c : changed) list += (list.empty() ? "" : ", ") + c;
+      spdlog::warn("learner: resumed with a changed config (sections: {}); the earlier one is {}",
+                   list, kept);
+    }
+  }
+  SaveJsonFileAtomic(config_path, record);
 
   // Bigger messages make ZeroMQ drop the sender's connection before they are read into memory.
   rollout_sock_.set(zmq::sockopt::maxmsgsize, static_cast<int64_t>(limits_.max_message_bytes));

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <thread>
@@ -144,6 +145,37 @@ TEST(InprocTest, NewRunStartsFromInitFromCheckpointWeights) {
     for (int i = 0; i < a.params_size(); ++i) same += c.trainer().model().params(i) == a.params(i);
     EXPECT_LT(same, a.params_size());
   }
+}
+
+// A resume with the same config rewrites config.json in place; one with a changed config (a lower
+// learning rate for the last stretch) keeps the earlier config under the update it ended at.
+TEST(InprocTest, ResumeWithAChangedConfigKeepsTheEarlierOne) {
+  std::string dir;
+  ASSERT_EQ(RunInproc("cfg-hist", 2, 1, &dir).learner_updates, 2u);
+  const Json before = LoadJsonFile(dir + "/config.json");
+  zmq::context_t ctx(1);
+  LearnerOptions lo = InprocOptions("cfg-hist-same", dir);
+  lo.resume = true;
+  {
+    LearnerService learner(ctx, MakeLearnerSetup(ExperimentConfigFromJson(MockConfig(), "same")),
+                           lo);
+    ASSERT_EQ(learner.counters().updates(), 2u);
+  }
+  EXPECT_EQ(LoadJsonFile(dir + "/config.json"), before);
+  EXPECT_FALSE(std::filesystem::exists(dir + "/config-to-0000000002.json"));
+
+  Json changed = MockConfig();
+  changed["ppo"]["learning_rate"] = 1e-5;
+  lo.rollout_bind += "-lr";
+  lo.weights_bind += "-lr";
+  {
+    LearnerService learner(ctx, MakeLearnerSetup(ExperimentConfigFromJson(changed, "lr")), lo);
+    ASSERT_EQ(learner.counters().updates(), 2u);
+  }
+  const Json now = LoadJsonFile(dir + "/config.json");
+  EXPECT_FLOAT_EQ(now["ppo"]["learning_rate"].get<float>(), 1e-5f);
+  ASSERT_TRUE(std::filesystem::exists(dir + "/config-to-0000000002.json"));
+  EXPECT_EQ(LoadJsonFile(dir + "/config-to-0000000002.json"), before);
 }
 
 TEST(InprocTest, InitFromRefusesMissingCorruptOrMismatchedCheckpoints) {
