@@ -48,13 +48,7 @@ void HierarchicalCollector::CollectMeta(PolicyRunner* meta,
   next_obs_.resize(spec.obs_dim);
   norm_obs_.resize(spec.obs_dim);
   meta_action_.resize(mc.action_size());
-  if (out->obs_dim != spec.obs_dim || out->action_size != mc.action_size()) {
-    *out = Rollout(spec.obs_dim, mc.action_size());
-  }
-  out->Clear();
-  out->stream_id = stream_id_;
-  out->policy_version = meta->version();
-  out->Reserve(steps);
+  out->Begin(spec.obs_dim, mc.action_size(), stream_id_, meta->version(), steps);
   meta->ClearObsStatsDelta();
   for (int t = 0; t < steps; ++t) {
     if (need_reset_) {

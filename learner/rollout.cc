@@ -17,6 +17,17 @@ void Rollout::Reserve(int steps) {
   bootstrap_values.reserve(steps);
 }
 
+void Rollout::Begin(int obs_dim_in, int action_size_in, uint64_t stream_id_in,
+                    uint64_t policy_version_in, int steps) {
+  if (obs_dim != obs_dim_in || action_size != action_size_in) {
+    *this = Rollout(obs_dim_in, action_size_in);
+  }
+  Clear();
+  stream_id = stream_id_in;
+  policy_version = policy_version_in;
+  Reserve(steps);
+}
+
 void Rollout::Clear() {
   obs.clear();
   actions.clear();
@@ -174,13 +185,7 @@ void RolloutCollector::Collect(PolicyRunner* runner, Rng& rng, int steps, Rollou
                       std::to_string(spec.obs_dim));
   }
   if (static_cast<int>(action_.size()) < action_size) action_.resize(action_size);
-  if (out->obs_dim != spec.obs_dim || out->action_size != action_size) {
-    *out = Rollout(spec.obs_dim, action_size);
-  }
-  out->Clear();
-  out->stream_id = stream_id_;
-  out->policy_version = runner->version();
-  out->Reserve(steps);
+  out->Begin(spec.obs_dim, action_size, stream_id_, runner->version(), steps);
   runner->ClearObsStatsDelta();
   for (int t = 0; t < steps; ++t) {
     if (need_reset_) {

@@ -43,6 +43,8 @@ struct Rollout {
   int size() const { return static_cast<int>(rewards.size()); }
   void Reserve(int steps);
   void Clear();  // keeps dims, stream id and capacity
+  // Starts a segment of up to `steps` steps: resized (and emptied) for these dims, else cleared.
+  void Begin(int obs_dim, int action_size, uint64_t stream_id, uint64_t policy_version, int steps);
   void Add(const float* norm_obs, const float* action, float log_prob, float value, float reward,
            bool terminated, bool truncated, float bootstrap_value);
   // Throws ConfigError naming ctx when array sizes disagree or values are not finite.

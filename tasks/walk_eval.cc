@@ -250,8 +250,8 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
   // The same meter on the imitated clip over the mean episode length: sliding a clean reference
   // walk itself scores (the swing foot counts while it is low).
   const double ref_s = std::max(dt, secs / n);
-  const FootSlidingMeter ref = ReferenceFootSliding(
-      env->model(), ReferenceMotion::Load(config.walk.MotionPath()), ref_s, dt, o.foot_sliding);
+  const FootSlidingMeter ref =
+      ReferenceFootSliding(env->model(), task.motion(), ref_s, dt, o.foot_sliding);
   j["foot_sliding"]["reference"] = ref.ToJson(ref_s);
   if (target_mode) {
     j["targets_reached"] = targets;
