@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <numeric>
 #include <sstream>
 
 #include "common/proto/wire.pb.h"
@@ -139,7 +140,7 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
 
   const bool target_mode = config.walk.stage == WalkStage::kTarget;
   std::vector<float> obs(spec.obs_dim), next(spec.obs_dim), action(spec.act_dim);
-  int no_fall = 0, falls = 0, invalid = 0, targets = 0, targets_missed = 0;
+  int no_fall = 0, falls = 0, invalid = 0;
   int64_t steps_total = 0;
   double sum_return = 0, sum_sim = 0, sum_heading = 0, sum_forward = 0;
   // Where falls happen, to tell a balance problem from a steering one: the episode time, the time
@@ -149,6 +150,9 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
   // than the walking speed times the re-draw time cannot be reached at all (docs/walk.md).
   constexpr int kDistBins = 6;
   std::array<int, kDistBins> bin_reached{}, bin_resolved{};
+  auto target_bin = [&] {
+    return std::clamp(static_cast<int>(task.target_drawn_distance_m()), 0, kDistBins - 1);
+  };
   for (int e = 0; e < o.episodes; ++e) {
     // Episode e depends only on (seed, e): any subset of episodes can be rerun alone.
     // (Rng::Seed scrambles its seed, so nearby integers give unrelated streams.)
@@ -157,10 +161,6 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
     Rng act_rng(2 * episode_seed + 1);
     env->Reset(obs.data());
     const double x0 = env->humanoid_state().root_pos.x();
-    auto target_bin = [&] {
-      const double d = task.target_drawn_distance_m();
-      return std::clamp(static_cast<int>(d), 0, kDistBins - 1);
-    };
     int open_bin = target_bin();
     sliding_meter.Start(body_pose);
     auto record = [&](int step) {
@@ -190,8 +190,7 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
       if (!r.invalid) {
         const WalkTerms& t = task.last_terms();
         sum_sim += t.similarity;
-        if (t.target_reached) ++targets;
-        if (t.target_redrawn && !t.target_reached) ++targets_missed;  // its 2.5 s ran out
+        // A re-draw resolves the open target: reached, or its 2.5 s ran out.
         if (t.target_redrawn) {
           ++bin_resolved[open_bin];
           if (t.target_reached) ++bin_reached[open_bin];
@@ -254,6 +253,9 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
       ReferenceFootSliding(env->model(), task.motion(), ref_s, dt, o.foot_sliding);
   j["foot_sliding"]["reference"] = ref.ToJson(ref_s);
   if (target_mode) {
+    const int targets = std::accumulate(bin_reached.begin(), bin_reached.end(), 0);
+    const int targets_missed =
+        std::accumulate(bin_resolved.begin(), bin_resolved.end(), 0) - targets;
     j["targets_reached"] = targets;
     j["targets_reached_per_min"] = targets / (secs / 60.0);
     // Of the targets that were reached or ran out of time (not the one open at episode end).

@@ -48,6 +48,36 @@ double Mean(const std::vector<double>& v) {
   return v.empty() ? 0.0 : std::accumulate(v.begin(), v.end(), 0.0) / v.size();
 }
 
+// On a resume: when the run's config.json differs from the config now in force, it is moved to
+// config-to-<update>.json (the config of updates up to `update`) and the changed sections are
+// logged. An unreadable config.json counts as changed and is kept as it is.
+void KeepChangedConfig(const std::string& config_path, const Json& record, uint64_t update) {
+  if (!std::filesystem::exists(config_path)) return;
+  Json previous;
+  try {
+    previous = LoadJsonFile(config_path);
+  } catch (const ConfigError& e) {
+    previous = Json{{"unreadable", e.what()}};
+  }
+  if (previous == record) return;
+  char name[64];
+  std::snprintf(name, sizeof(name), "/config-to-%010llu.json",
+                static_cast<unsigned long long>(update));
+  const std::string kept = std::filesystem::path(config_path).parent_path().string() + name;
+  // Already there: a resume at this update before, whose config made no updates of its own.
+  if (!std::filesystem::exists(kept)) std::filesystem::rename(config_path, kept);
+  std::string changed;
+  auto add = [&](const std::string& key) { changed += (changed.empty() ? "" : ", ") + key; };
+  for (const auto& [key, value] : record.items()) {
+    if (!previous.contains(key) || previous[key] != value) add(key);
+  }
+  for (const auto& [key, value] : previous.items()) {
+    if (!record.contains(key)) add(key);
+  }
+  spdlog::warn("learner: resumed with a changed config (sections: {}); the earlier one is {}",
+               changed, kept);
+}
+
 }  // namespace
 
 LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
@@ -74,32 +104,7 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
   Json record = setup_.resolved_config;
   record["seed"] = setup_.seed;
   const std::string config_path = options_.run_dir + "/config.json";
-  if (!resumed_from_.empty() && std::filesystem::exists(config_path)) {
-    Json previous;
-    try {
-      previous = LoadJsonFile(config_path);
-    } catch (const ConfigError& e) {
-      previous = Json{{"unreadable", e.what()}};  // kept as it was, below
-    }
-    if (previous != record) {
-      char name[64];
-      std::snprintf(name, sizeof(name), "/config-to-%010llu.json",
-                    static_cast<unsigned long long>(counters_.updates()));
-      const std::string kept = options_.run_dir + name;
-      if (!std::filesystem::exists(kept)) std::filesystem::rename(config_path, kept);
-      std::vector<std::string> changed;
-      for (const auto& [key, value] : record.items()) {
-        if (!previous.contains(key) || previous[key] != value) changed.push_back(key);
-      }
-      for (const auto& [key, value] : previous.items()) {
-        if (!record.contains(key)) changed.push_back(key);
-      }
-      std::string list;
-      for (const auto& c : changed) list += (list.empty() ? "" : ", ") + c;
-      spdlog::warn("learner: resumed with a changed config (sections: {}); the earlier one is {}",
-                   list, kept);
-    }
-  }
+  if (!resumed_from_.empty()) KeepChangedConfig(config_path, record, counters_.updates());
   SaveJsonFileAtomic(config_path, record);
 
   // Bigger messages make ZeroMQ drop the sender's connection before they are read into memory.
