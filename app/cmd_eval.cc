@@ -17,7 +17,8 @@ namespace {
 // Task config: the file's when given, else the task's defaults; then the command-line overrides.
 TaskEnvConfig ResolveConfig(const std::string& task, const std::string& config_path,
                             const std::string& stage, const std::string& variant,
-                            const std::string& action_mode, const std::string& start = "") {
+                            const std::string& action_mode, const std::string& start = "",
+                            double target_turn_prob = -1) {
   TaskEnvConfig c =
       config_path.empty() ? TaskEnvConfig::Defaults(task) : TaskEnvConfig::Load(config_path);
   if (c.env.task != task) {
@@ -38,6 +39,7 @@ TaskEnvConfig ResolveConfig(const std::string& task, const std::string& config_p
   if (!action_mode.empty()) j["action_mode"] = action_mode;
   if (start == "reference") j["walk"]["reference_state_init"] = true;
   if (start == "fixed") j["walk"]["reference_state_init"] = false;
+  if (target_turn_prob >= 0) j["walk"]["target_turn_prob"] = target_turn_prob;
   return TaskEnvConfig::FromJson(j, config_path.empty() ? "--task " + task : config_path);
 }
 
@@ -46,6 +48,7 @@ TaskEnvConfig ResolveConfig(const std::string& task, const std::string& config_p
 void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   struct EvalOpts {
     std::string task = "walk", model, config, stage, variant, action_mode, filmstrip, start;
+    double target_turn_prob = 0.0;  // eval measures the paper's targets, not a training curriculum
     WalkEvalOptions eval;
     int frames = 6;
     int panel_px = 220;
@@ -73,6 +76,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       ->check(CLI::IsMember({"paper", "authors"}));
   cmd->add_option("--action-mode", o->action_mode, "action mode override")
       ->check(CLI::IsMember({"torque", "pd"}));
+  cmd->add_option("--target-turn-prob", o->target_turn_prob,
+                  "share of wide-angle target draws (walk.target_turn_prob); default 0: the "
+                  "paper's targets, whatever curriculum the run's config trained with")
+      ->check(CLI::Range(0.0, 1.0));
   cmd->add_option("--episodes", o->eval.episodes, "number of episodes")
       ->check(CLI::Range(1, 1000000));
   cmd->add_option("--seed", o->eval.seed, "episode seed (episode e uses (seed, e))");
@@ -89,7 +96,8 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   cmd->add_flag("--json", o->json, "print one JSON object on stdout");
   cmd->callback([o]() {
     const TaskEnvConfig config =
-        ResolveConfig(o->task, o->config, o->stage, o->variant, o->action_mode, o->start);
+        ResolveConfig(o->task, o->config, o->stage, o->variant, o->action_mode, o->start,
+                      o->target_turn_prob);
     const proto::ModelWeights weights = LoadModelFile(o->model);
     WalkEvalRecording rec;
     std::cerr << "eval: " << o->model << " (version " << weights.version() << "), "

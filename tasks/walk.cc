@@ -40,7 +40,8 @@ WalkTaskConfig WalkTaskConfig::FromJson(const Json& j, const std::string& ctx) {
                  {"reward_variant", "motion_file", "stage", "similarity", "root_vel_weight",
                   "root_vel_alpha", "target_weight", "target_k", "min_root_z", "max_episode_steps",
                   "reference_state_init", "target_redraw_s", "target_reach_m", "target_min_dist_m",
-                  "target_max_dist_m", "target_max_angle_deg", "forward_target"},
+                  "target_max_dist_m", "target_max_angle_deg", "target_turn_prob",
+                  "target_turn_max_angle_deg", "forward_target"},
                  ctx);
   WalkTaskConfig c;
   std::string variant = c.reward_variant;
@@ -72,11 +73,19 @@ WalkTaskConfig WalkTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "target_min_dist_m", c.target_min_dist_m, ctx);
   GetOptional(j, "target_max_dist_m", c.target_max_dist_m, ctx);
   GetOptional(j, "target_max_angle_deg", c.target_max_angle_deg, ctx);
+  GetOptional(j, "target_turn_prob", c.target_turn_prob, ctx);
+  GetOptional(j, "target_turn_max_angle_deg", c.target_turn_max_angle_deg, ctx);
   GetOptional(j, "forward_target", c.forward_target, ctx);
   if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
   if (!(c.target_redraw_s > 0)) throw ConfigError(ctx + ".target_redraw_s: must be > 0");
   if (!(c.target_min_dist_m > 0) || c.target_max_dist_m < c.target_min_dist_m) {
     throw ConfigError(ctx + ".target_min_dist_m/target_max_dist_m: need 0 < min <= max");
+  }
+  if (!(c.target_turn_prob >= 0 && c.target_turn_prob <= 1)) {
+    throw ConfigError(ctx + ".target_turn_prob: must be in [0, 1]");
+  }
+  if (!(c.target_turn_max_angle_deg >= 0 && c.target_turn_max_angle_deg <= 180)) {
+    throw ConfigError(ctx + ".target_turn_max_angle_deg: must be in [0, 180]");
   }
   return c;
 }
@@ -98,6 +107,8 @@ Json WalkTaskConfig::ToJson() const {
               {"target_min_dist_m", target_min_dist_m},
               {"target_max_dist_m", target_max_dist_m},
               {"target_max_angle_deg", target_max_angle_deg},
+              {"target_turn_prob", target_turn_prob},
+              {"target_turn_max_angle_deg", target_turn_max_angle_deg},
               {"forward_target", forward_target}};
 }
 
@@ -154,7 +165,10 @@ void WalkTask::DrawTarget(HumanoidChairEnv& env, Rng& rng) {
   // Authors: heading = the torso's x axis projected on the ground (length cos(pitch), kept).
   const HumanoidState& s = env.humanoid_state();
   const Eigen::Vector2d heading = (s.root_quat * Eigen::Vector3d::UnitX()).head<2>();
-  const double max_theta = c_.target_max_angle_deg * M_PI / 180.0;
+  // The curriculum's coin is only tossed when it is on, so runs without it draw as before.
+  const bool turn = c_.target_turn_prob > 0 && rng.Uniform(0.0, 1.0) < c_.target_turn_prob;
+  const double max_theta =
+      (turn ? c_.target_turn_max_angle_deg : c_.target_max_angle_deg) * M_PI / 180.0;
   const double theta = rng.Uniform(-max_theta, max_theta);
   const double dist = rng.Uniform(c_.target_min_dist_m, c_.target_max_dist_m);
   const Eigen::Vector2d dir = Eigen::Rotation2Dd(theta) * heading;

@@ -50,6 +50,11 @@ struct WalkTaskConfig {
   double target_min_dist_m = 1.0;  // dist ~ U(min, max) [m]
   double target_max_dist_m = 5.0;
   double target_max_angle_deg = 45.0;  // theta ~ U(-max, max) from the heading [deg]
+  // Training curriculum (ours, not the paper's; 0 = off = the paper): with this probability a draw
+  // uses U(-turn_max, turn_max) instead, so targets beside and behind (which the walker meets
+  // after passing a target at > target_reach_m) are practised. `perch eval` turns it off.
+  double target_turn_prob = 0.0;
+  double target_turn_max_angle_deg = 180.0;  // [deg]
   // Stage "forward": the goal feature points at this fixed world point (Roboschool's default) [m].
   std::array<double, 2> forward_target{1000.0, 0.0};
 

@@ -280,7 +280,11 @@ TEST(EvalCommand, ReadsTheEnvOfAnExperimentConfigAndOverridesTheStart) {
       {"seed", 3},
       {"env",
        {{"task", "walk"},
-        {"walk", {{"stage", "forward"}, {"reference_state_init", false}, {"min_root_z", 0.7}}}}},
+        {"walk",
+         {{"stage", "forward"},
+          {"reference_state_init", false},
+          {"min_root_z", 0.7},
+          {"target_turn_prob", 0.3}}}}},
       {"cluster", {{"task", "walk"}}}};
   const std::string cfg = Write("walk_cli_exp.json", exp.dump());
   int rc = 0;
@@ -291,6 +295,13 @@ TEST(EvalCommand, ReadsTheEnvOfAnExperimentConfigAndOverridesTheStart) {
   ASSERT_EQ(rc, 0) << err;
   EXPECT_EQ(j["config"]["walk"]["min_root_z"], 0.7);  // from the file's env section
   EXPECT_EQ(j["config"]["walk"]["reference_state_init"], false);
+  // A training curriculum is not evaluated unless asked for.
+  EXPECT_EQ(j["config"]["walk"]["target_turn_prob"], 0.0);
+  j = Json::parse(RunPerch("eval --task walk --model " + model + " --config " + cfg +
+                               " --target-turn-prob 0.3 --episodes 1 --json",
+                           &rc, &err));
+  ASSERT_EQ(rc, 0) << err;
+  EXPECT_EQ(j["config"]["walk"]["target_turn_prob"], 0.3);
   j = Json::parse(RunPerch("eval --task walk --model " + model + " --config " + cfg +
                                " --start reference --episodes 1 --json",
                            &rc, &err));

@@ -2,8 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
+#include <vector>
 
 #include "tasks/task_env.h"
 
@@ -71,6 +73,50 @@ TEST(WalkConfig, PresetsAndOverrides) {
   } catch (const ConfigError& e) {
     EXPECT_NE(std::string(e.what()).find("f.json.walk"), std::string::npos) << e.what();
   }
+}
+
+// The training curriculum (target_turn_prob): off by default; on, a share of the draws lands beside
+// or behind the walker, never beyond the turn angle; bad values are refused by name.
+TEST(WalkTask, TurnCurriculumDrawsWideTargetsOnlyWhenOn) {
+  EXPECT_EQ(WalkTaskConfig::FromJson(Json::object(), "cfg").target_turn_prob, 0.0);
+  for (const Json& bad : {Json{{"target_turn_prob", 1.5}}, Json{{"target_turn_prob", -0.1}},
+                          Json{{"target_turn_max_angle_deg", 200.0}}}) {
+    try {
+      WalkTaskConfig::FromJson(bad, "cfg");
+      FAIL() << bad.dump();
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find(bad.begin().key()), std::string::npos) << e.what();
+    }
+  }
+  const auto angles = [](double prob) {
+    TaskEnvConfig c = Walk("target");
+    c.walk.target_turn_prob = prob;
+    c.walk.target_turn_max_angle_deg = 150.0;
+    WalkEnv w = MakeWalk(c);
+    w.env->Seed(5);
+    w.env->Reset(w.obs.data());
+    Rng rng(7);
+    std::vector<double> out;
+    for (int i = 0; i < 400; ++i) {
+      // Reached every time: a fresh draw per call.
+      w.env->SetWalkTarget(w.env->BodyXyz().head<2>());
+      w.task->BeforeObservation(*w.env, rng);
+      const HumanoidState& s = w.env->humanoid_state();
+      const Eigen::Vector2d rel = w.env->walk_target() - s.root_pos.head<2>();
+      const Eigen::Vector2d heading = (s.root_quat * Eigen::Vector3d::UnitX()).head<2>();
+      out.push_back(std::abs(AngleDiff(std::atan2(rel.y(), rel.x()),
+                                       std::atan2(heading.y(), heading.x()))) *
+                    180 / M_PI);
+    }
+    return out;
+  };
+  const std::vector<double> off = angles(0.0), half = angles(0.5);
+  EXPECT_LE(*std::max_element(off.begin(), off.end()), 45.0 + 1e-6);
+  EXPECT_LE(*std::max_element(half.begin(), half.end()), 150.0 + 1e-6);
+  const auto wide = std::count_if(half.begin(), half.end(), [](double a) { return a > 45.0; });
+  // Half the draws use U(-150, 150): 70% of those exceed 45 deg, so about 140 of 400.
+  EXPECT_GT(wide, 90);
+  EXPECT_LT(wide, 190);
 }
 
 TEST(WalkTask, StartsAtTheReferenceFirstFrameAtTheOrigin) {
