@@ -146,6 +146,9 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
   // Where falls happen, to tell a balance problem from a steering one: the episode time, the time
   // since the current target was drawn and the heading error to it at the falling step.
   Json fall_times = Json::array(), fall_since_target = Json::array(), fall_heading = Json::array();
+  // Which episodes fell and the reference phase they started from (a bad start phase shows up as
+  // falls at similar times from similar phases; episode e can be rerun from (seed, e)).
+  Json fall_episodes = Json::array(), fall_start_phase = Json::array();
   // Reached / resolved targets by their distance when drawn, bins of 1 m from 0 m: a target farther
   // than the walking speed times the re-draw time cannot be reached at all (docs/walk.md).
   constexpr int kDistBins = 6;
@@ -216,6 +219,8 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
     if (fell) {
       ++falls;
       fall_times.push_back(steps * dt);
+      fall_episodes.push_back(e);
+      fall_start_phase.push_back(task.start_time());
       if (target_mode) {
         fall_since_target.push_back((steps - target_drawn_step) * dt);
         fall_heading.push_back(heading_err_deg);
@@ -245,7 +250,9 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
          {"mean_imitation_reward", sum_sim / static_cast<double>(steps_total)},
          {"mean_forward_speed_mps", sum_forward / n},
          {"foot_sliding", sliding_meter.ToJson(secs)},
-         {"fall_times_s", fall_times}};
+         {"fall_times_s", fall_times},
+         {"fall_episodes", fall_episodes},
+         {"fall_start_phase_s", fall_start_phase}};
   // The same meter on the imitated clip over the mean episode length: sliding a clean reference
   // walk itself scores (the swing foot counts while it is low).
   const double ref_s = std::max(dt, secs / n);

@@ -11,6 +11,7 @@
 
 #include "common/proto/model.pb.h"
 #include "common/proto/wire.pb.h"
+#include "motion/reference_motion.h"
 #include "learner/ppo.h"
 #include "viz/canvas.h"
 
@@ -128,12 +129,22 @@ TEST(WalkEval, FallsAreListedWithTheirTimeAndTargetAge) {
   TaskEnvConfig c = TaskEnvConfig::Defaults("walk");
   c.walk.stage = WalkStage::kTarget;
   c.walk.max_episode_steps = 600;
+  c.walk.reference_state_init = true;
   WalkEvalOptions o;
   o.episodes = 3;
   o.no_fall_s = 10.0;
   const Json j = EvaluateWalk(c, Untrained(4), o, nullptr);  // an untrained policy falls
   const double dt = c.env.physics.physics_dt * c.env.physics.substeps;
   ASSERT_EQ(j["fall_times_s"].size(), 3u);
+  EXPECT_EQ(j["fall_episodes"], (Json{0, 1, 2}));
+  // Start phases: within the clip, and different episodes start at different phases.
+  const double clip_s = ReferenceMotion::Load(c.walk.MotionPath()).duration();
+  ASSERT_EQ(j["fall_start_phase_s"].size(), 3u);
+  for (const Json& ph : j["fall_start_phase_s"]) {
+    EXPECT_GE(ph.get<double>(), 0.0);
+    EXPECT_LT(ph.get<double>(), clip_s);
+  }
+  EXPECT_NE(j["fall_start_phase_s"][0], j["fall_start_phase_s"][1]);
   ASSERT_EQ(j["fall_seconds_since_target"].size(), 3u);
   ASSERT_EQ(j["fall_heading_error_deg"].size(), 3u);
   double sum_t = 0;
