@@ -75,6 +75,15 @@ TEST(WalkConfig, PresetsAndOverrides) {
   }
 }
 
+// Azimuth of the walk target from the root, relative to the torso's heading as DrawTarget takes it
+// (x axis projected on the ground) [rad].
+double TargetAngleFromHeading(const HumanoidChairEnv& env) {
+  const HumanoidState& s = env.humanoid_state();
+  const Eigen::Vector2d rel = env.walk_target() - s.root_pos.head<2>();
+  const Eigen::Vector2d heading = (s.root_quat * Eigen::Vector3d::UnitX()).head<2>();
+  return AngleDiff(std::atan2(rel.y(), rel.x()), std::atan2(heading.y(), heading.x()));
+}
+
 // The training curriculum (target_turn_prob): off by default; on, a share of the draws lands beside
 // or behind the walker, never beyond the turn angle; bad values are refused by name.
 TEST(WalkTask, TurnCurriculumDrawsWideTargetsOnlyWhenOn) {
@@ -101,12 +110,7 @@ TEST(WalkTask, TurnCurriculumDrawsWideTargetsOnlyWhenOn) {
       // Reached every time: a fresh draw per call.
       w.env->SetWalkTarget(w.env->BodyXyz().head<2>());
       w.task->BeforeObservation(*w.env, rng);
-      const HumanoidState& s = w.env->humanoid_state();
-      const Eigen::Vector2d rel = w.env->walk_target() - s.root_pos.head<2>();
-      const Eigen::Vector2d heading = (s.root_quat * Eigen::Vector3d::UnitX()).head<2>();
-      out.push_back(std::abs(AngleDiff(std::atan2(rel.y(), rel.x()),
-                                       std::atan2(heading.y(), heading.x()))) *
-                    180 / M_PI);
+      out.push_back(std::abs(TargetAngleFromHeading(*w.env)) * 180 / M_PI);
     }
     return out;
   };
@@ -267,9 +271,7 @@ TEST(WalkTask, TargetsAreDrawnInFrontAndRedrawnOnTimeOrWhenReached) {
     const Eigen::Vector2d heading = (s.root_quat * Eigen::Vector3d::UnitX()).head<2>();
     EXPECT_GE(rel.norm(), c.walk.target_min_dist_m * heading.norm() - 1e-9) << when;
     EXPECT_LE(rel.norm(), c.walk.target_max_dist_m * heading.norm() + 1e-9) << when;
-    const double ang =
-        AngleDiff(std::atan2(rel.y(), rel.x()), std::atan2(heading.y(), heading.x()));
-    EXPECT_LE(std::abs(ang), max_angle + 1e-9) << when;
+    EXPECT_LE(std::abs(TargetAngleFromHeading(*w.env)), max_angle + 1e-9) << when;
   };
   check_in_front("reset");
   // The goal feature is (sin, cos) of the target's azimuth from the heading.
