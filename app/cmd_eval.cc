@@ -1,11 +1,15 @@
 // perch eval: evaluates a trained subtask policy (walk) over seeded episodes, optionally drawing a
 // filmstrip; perch train-local: bounded in-process PPO on a task env (no cluster), for comparisons.
+#include <filesystem>
 #include <iostream>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "app/commands.h"
 #include "envs/chair.h"
+#include "learner/model_average.h"
+#include "learner/service/checkpoint.h"
 #include "tasks/local_train.h"
 #include "tasks/task_env.h"
 #include "tasks/walk_eval.h"
@@ -169,6 +173,40 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       std::cout << summary.dump() << "\n";
     } else {
       std::cout << "wrote " << summary["weights"] << " and " << summary["curve"] << "\n";
+    }
+  });
+  struct AverageOpts {
+    std::vector<std::string> models;
+    std::string out;
+    bool json = false;
+  };
+  auto a = std::make_shared<AverageOpts>();
+  CLI::App* av = root.add_subcommand(
+      "average-models",
+      "Average the weights of policy snapshots of one run (Polyak/SWA) into one ModelWeights file");
+  av->add_option("models", a->models, "policy files (ModelWeights, LearnerState or checkpoint)")
+      ->required()
+      ->expected(2, 1 << 16);
+  av->add_option("--out", a->out, "output ModelWeights file (must not exist)")->required();
+  av->add_flag("--json", a->json, "print one JSON summary on stdout");
+  av->callback([a]() {
+    // Never replace a saved model: a typo in --out must not cost a result.
+    if (std::filesystem::exists(a->out)) throw ConfigError(a->out + ": exists; not overwritten");
+    std::vector<proto::ModelWeights> ws;
+    Json versions = Json::array();
+    for (const std::string& m : a->models) {
+      ws.push_back(LoadModelFile(m));
+      versions.push_back(ws.back().version());
+    }
+    const proto::ModelWeights avg = AverageModels(ws);
+    WriteFileAtomic(a->out, avg.SerializeAsString());
+    Json summary = {{"out", a->out},         {"models", a->models},
+                    {"versions", versions},  {"version", avg.version()},
+                    {"num_params", avg.params_size()}};
+    if (a->json) {
+      std::cout << summary.dump() << "\n";
+    } else {
+      std::cout << "wrote " << a->out << " (mean of " << ws.size() << " models)\n";
     }
   });
 }

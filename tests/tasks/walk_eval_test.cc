@@ -349,5 +349,43 @@ TEST(EvalCommand, TrainLocalWritesWeightsThatEvalReads) {
   EXPECT_EQ(j["model_version"], 2);
 }
 
+// perch average-models: reads any policy file kind, writes the mean that eval reads, and never
+// replaces an existing output.
+TEST(EvalCommand, AverageModelsWritesTheMeanAndNeverOverwrites) {
+  if (!std::getenv("PERCH_BIN")) GTEST_SKIP() << "PERCH_BIN not set";
+  const proto::ModelWeights a = Untrained(11), b = Untrained(12);
+  const std::string pa = Write("walk_avg_a.bin", a.SerializeAsString());
+  const std::string pb = Write("walk_avg_b.bin", b.SerializeAsString());
+  const std::string out = ::testing::TempDir() + "/walk_avg_out.bin";
+  fs::remove(out);
+  int rc = 0;
+  std::string err;
+  const Json s = Json::parse(
+      RunPerch("average-models " + pa + " " + pb + " --out " + out + " --json", &rc, &err));
+  ASSERT_EQ(rc, 0) << err;
+  EXPECT_EQ(s["versions"].size(), 2u);
+  const proto::ModelWeights avg = LoadModelFile(out);
+  ASSERT_EQ(avg.params_size(), a.params_size());
+  for (int k = 0; k < a.params_size(); k += 97) {
+    EXPECT_FLOAT_EQ(avg.params(k), 0.5f * (a.params(k) + b.params(k))) << k;
+  }
+  const Json j = Json::parse(
+      RunPerch("eval --task walk --model " + out + " --episodes 1 --json", &rc, &err));
+  ASSERT_EQ(rc, 0) << err;
+  EXPECT_EQ(j["episodes"], 1);
+
+  const std::string before = LoadModelFile(out).SerializeAsString();
+  RunPerch("average-models " + pa + " " + pa + " --out " + out, &rc, &err);
+  EXPECT_EQ(rc, 2);
+  EXPECT_NE(err.find("exists"), std::string::npos) << err;
+  EXPECT_EQ(LoadModelFile(out).SerializeAsString(), before);
+  const std::string bad = Write("walk_avg_bad.bin", "garbage");
+  fs::remove(out + ".2");
+  RunPerch("average-models " + pa + " " + bad + " --out " + out + ".2", &rc, &err);
+  EXPECT_EQ(rc, 2);
+  EXPECT_NE(err.find(bad), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(out + ".2"));
+}
+
 }  // namespace
 }  // namespace perch
