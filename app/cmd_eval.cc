@@ -18,11 +18,19 @@
 namespace perch {
 namespace {
 
+// Command-line overrides of a task config; empty / negative: keep the file's value.
+struct ConfigOverrides {
+  std::string task = "walk";
+  std::string config_path;  // empty: the task's defaults
+  std::string stage, variant, action_mode;
+  std::string start;  // "fixed" or "reference"
+  double target_turn_prob = -1.0;
+};
+
 // Task config: the file's when given, else the task's defaults; then the command-line overrides.
-TaskEnvConfig ResolveConfig(const std::string& task, const std::string& config_path,
-                            const std::string& stage, const std::string& variant,
-                            const std::string& action_mode, const std::string& start = "",
-                            double target_turn_prob = -1) {
+TaskEnvConfig ResolveConfig(const ConfigOverrides& o) {
+  const std::string& task = o.task;
+  const std::string& config_path = o.config_path;
   TaskEnvConfig c =
       config_path.empty() ? TaskEnvConfig::Defaults(task) : TaskEnvConfig::Load(config_path);
   if (c.env.task != task) {
@@ -30,20 +38,20 @@ TaskEnvConfig ResolveConfig(const std::string& task, const std::string& config_p
                       "\"");
   }
   Json j = c.ToJson();
-  if (!stage.empty()) j["walk"]["stage"] = stage;
-  if (!variant.empty()) {
+  if (!o.stage.empty()) j["walk"]["stage"] = o.stage;
+  if (!o.variant.empty()) {
     // The preset replaces the reward fields, so drop them before re-reading.
     Json& w = j["walk"];
     for (const char* k :
          {"similarity", "root_vel_weight", "root_vel_alpha", "target_weight", "target_k"}) {
       w.erase(k);
     }
-    w["reward_variant"] = variant;
+    w["reward_variant"] = o.variant;
   }
-  if (!action_mode.empty()) j["action_mode"] = action_mode;
-  if (start == "reference") j["walk"]["reference_state_init"] = true;
-  if (start == "fixed") j["walk"]["reference_state_init"] = false;
-  if (target_turn_prob >= 0) j["walk"]["target_turn_prob"] = target_turn_prob;
+  if (!o.action_mode.empty()) j["action_mode"] = o.action_mode;
+  if (o.start == "reference") j["walk"]["reference_state_init"] = true;
+  if (o.start == "fixed") j["walk"]["reference_state_init"] = false;
+  if (o.target_turn_prob >= 0) j["walk"]["target_turn_prob"] = o.target_turn_prob;
   return TaskEnvConfig::FromJson(j, config_path.empty() ? "--task " + task : config_path);
 }
 
@@ -51,8 +59,8 @@ TaskEnvConfig ResolveConfig(const std::string& task, const std::string& config_p
 
 void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   struct EvalOpts {
-    std::string task = "walk", model, config, stage, variant, action_mode, filmstrip, start;
-    double target_turn_prob = 0.0;  // eval measures the paper's targets, not a training curriculum
+    ConfigOverrides cfg;
+    std::string model, filmstrip;
     WalkEvalOptions eval;
     int frames = 6;
     int panel_px = 220;
@@ -60,27 +68,28 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     bool json = false;
   };
   auto o = std::make_shared<EvalOpts>();
+  o->cfg.target_turn_prob = 0.0;  // eval measures the paper's targets, not a training curriculum
   CLI::App* cmd =
       root.add_subcommand("eval", "Evaluate a trained subtask policy over seeded episodes");
-  cmd->add_option("--task", o->task, "task to evaluate")->check(CLI::IsMember({"walk"}));
+  cmd->add_option("--task", o->cfg.task, "task to evaluate")->check(CLI::IsMember({"walk"}));
   cmd->add_option("--model", o->model,
                   "policy file: serialized perch.proto.ModelWeights or LearnerState, or a PERCHCKP "
                   "cluster checkpoint")
       ->required();
-  cmd->add_option("--config", o->config,
+  cmd->add_option("--config", o->cfg.config_path,
                   "task env config JSON, or an experiment / run config.json (its env section); "
                   "default: the task's defaults");
-  cmd->add_option("--start", o->start,
+  cmd->add_option("--start", o->cfg.start,
                   "episode start override: fixed (the config's initial pose) or reference (a "
                   "random phase of the reference motion, the stage-1 training distribution)")
       ->check(CLI::IsMember({"fixed", "reference"}));
-  cmd->add_option("--stage", o->stage, "walk stage override")
+  cmd->add_option("--stage", o->cfg.stage, "walk stage override")
       ->check(CLI::IsMember({"forward", "target"}));
-  cmd->add_option("--reward-variant", o->variant, "reward preset override")
+  cmd->add_option("--reward-variant", o->cfg.variant, "reward preset override")
       ->check(CLI::IsMember({"paper", "authors"}));
-  cmd->add_option("--action-mode", o->action_mode, "action mode override")
+  cmd->add_option("--action-mode", o->cfg.action_mode, "action mode override")
       ->check(CLI::IsMember({"torque", "pd"}));
-  cmd->add_option("--target-turn-prob", o->target_turn_prob,
+  cmd->add_option("--target-turn-prob", o->cfg.target_turn_prob,
                   "share of wide-angle target draws (walk.target_turn_prob); default 0: the "
                   "paper's targets, whatever curriculum the run's config trained with")
       ->check(CLI::Range(0.0, 1.0));
@@ -99,9 +108,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                 "one world window for all panels (default: each panel follows the humanoid)");
   cmd->add_flag("--json", o->json, "print one JSON object on stdout");
   cmd->callback([o]() {
-    const TaskEnvConfig config =
-        ResolveConfig(o->task, o->config, o->stage, o->variant, o->action_mode, o->start,
-                      o->target_turn_prob);
+    const TaskEnvConfig config = ResolveConfig(o->cfg);
     const proto::ModelWeights weights = LoadModelFile(o->model);
     WalkEvalRecording rec;
     std::cerr << "eval: " << o->model << " (version " << weights.version() << "), "
@@ -135,7 +142,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   });
 
   struct TrainOpts {
-    std::string task = "walk", config, stage, variant, action_mode;
+    ConfigOverrides cfg;
     LocalTrainOptions train;
     int steps_per_update = 0;
     bool json = false;
@@ -143,13 +150,14 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   auto t = std::make_shared<TrainOpts>();
   CLI::App* tr = root.add_subcommand(
       "train-local", "Bounded in-process PPO on a task env (no cluster): weights + learning curve");
-  tr->add_option("--task", t->task, "task")->check(CLI::IsMember({"walk", "stand"}));
-  tr->add_option("--config", t->config, "task env config JSON (default: the task's defaults)");
-  tr->add_option("--stage", t->stage, "walk stage override")
+  tr->add_option("--task", t->cfg.task, "task")->check(CLI::IsMember({"walk", "stand"}));
+  tr->add_option("--config", t->cfg.config_path,
+                 "task env config JSON (default: the task's defaults)");
+  tr->add_option("--stage", t->cfg.stage, "walk stage override")
       ->check(CLI::IsMember({"forward", "target"}));
-  tr->add_option("--reward-variant", t->variant, "reward preset override")
+  tr->add_option("--reward-variant", t->cfg.variant, "reward preset override")
       ->check(CLI::IsMember({"paper", "authors"}));
-  tr->add_option("--action-mode", t->action_mode, "action mode override")
+  tr->add_option("--action-mode", t->cfg.action_mode, "action mode override")
       ->check(CLI::IsMember({"torque", "pd"}));
   tr->add_option("--samples", t->train.samples, "env steps in total")->check(CLI::PositiveNumber);
   tr->add_option("--steps-per-update", t->steps_per_update, "PPO nsteps (default 8192)")
@@ -159,11 +167,11 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   tr->add_flag("--json", t->json, "print one JSON summary on stdout");
   tr->callback([t]() {
     TaskEnvConfig config;
-    if (t->task == "walk") {
-      config = ResolveConfig(t->task, t->config, t->stage, t->variant, t->action_mode);
+    if (t->cfg.task == "walk") {
+      config = ResolveConfig(t->cfg);
     } else {
-      config =
-          t->config.empty() ? TaskEnvConfig::Defaults(t->task) : TaskEnvConfig::Load(t->config);
+      config = t->cfg.config_path.empty() ? TaskEnvConfig::Defaults(t->cfg.task)
+                                          : TaskEnvConfig::Load(t->cfg.config_path);
     }
     if (t->steps_per_update > 0) t->train.ppo.steps_per_update = t->steps_per_update;
     const Json summary = TrainLocal(config, t->train, [](const Json& row) {
@@ -200,8 +208,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     }
     const proto::ModelWeights avg = AverageModels(ws);
     WriteFileAtomic(a->out, avg.SerializeAsString());
-    Json summary = {{"out", a->out},         {"models", a->models},
-                    {"versions", versions},  {"version", avg.version()},
+    Json summary = {{"out", a->out},
+                    {"models", a->models},
+                    {"versions", versions},
+                    {"version", avg.version()},
                     {"num_params", avg.params_size()}};
     if (a->json) {
       std::cout << summary.dump() << "\n";
