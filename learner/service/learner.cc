@@ -314,6 +314,7 @@ bool LearnerService::HandleSegment(const proto::Segment& seg) {
   for (const auto& e : seg.episodes()) {
     batch_returns_.push_back(e.episode_return());
     batch_lengths_.push_back(e.length());
+    batch_terminated_ += e.terminated();
   }
   counters_.set_episodes(counters_.episodes() + seg.episodes_size());
   counters_.set_segments(counters_.segments() + 1);
@@ -349,6 +350,7 @@ void LearnerService::Train() {
     batch_segments_ = 0;
     batch_returns_.clear();
     batch_lengths_.clear();
+    batch_terminated_ = 0;
     return;
   }
   counters_.set_updates(counters_.updates() + 1);
@@ -367,6 +369,7 @@ void LearnerService::Train() {
   batch_segments_ = 0;
   batch_returns_.clear();
   batch_lengths_.clear();
+  batch_terminated_ = 0;
   if (counters_.updates() % setup_.cluster.checkpoint_every == 0) SaveCheckpoint();
 }
 
@@ -379,6 +382,7 @@ void LearnerService::WriteMetrics(const UpdateStats& u, double update_s, uint64_
       {"update_s", update_s},
       {"policy_lag_mean", last_lag_mean_},
       {"episodes", batch_returns_.size()},
+      {"episodes_terminated", batch_terminated_},  // falls; the others hit the time limit
       {"return_mean", batch_returns_.empty() ? Json(nullptr) : Json(Mean(batch_returns_))},
       {"episode_length_mean", batch_lengths_.empty() ? Json(nullptr) : Json(Mean(batch_lengths_))},
       {"dropped_stale", counters_.dropped_stale()},

@@ -109,6 +109,7 @@ class LearnerService {
   uint64_t batch_segments_ = 0;
   std::vector<double> batch_returns_;
   std::vector<double> batch_lengths_;
+  int batch_terminated_ = 0;  // episodes of the batch that ended by termination (fell)
   uint64_t wire_samples_ = 0;  // samples in those messages, since this process started
   uint64_t wire_bytes_ = 0;    // bytes of accepted segment messages (wire_bytes_per_sample)
   std::map<uint64_t, double> actor_last_seen_;  // actor_instance -> monotonic seconds

@@ -95,6 +95,23 @@ TEST(InprocTest, LearnerAndTwoActorsInOneProcessLearnTheMockTask) {
     return n ? s / n : 0.0;
   };
   EXPECT_GT(mean_return(25, 30), mean_return(0, 5) + 2.0);
+  // Falls are counted apart from time limits: the mock's time limit is 32 steps, so a batch whose
+  // episodes average fewer steps had falls, and one without falls averages exactly 32.
+  int falls = 0;
+  for (const Json& row : r.rows) {
+    const int n = row["episodes"].get<int>(), f = row["episodes_terminated"].get<int>();
+    EXPECT_LE(f, n);
+    falls += f;
+    if (n == 0) continue;
+    const double len = row["episode_length_mean"].get<double>();
+    if (f == 0) {
+      EXPECT_DOUBLE_EQ(len, 32.0);
+    }
+    if (len < 32.0) {
+      EXPECT_GT(f, 0);
+    }
+  }
+  EXPECT_GT(falls, 0);
 }
 
 // Fine-tuning (walk stage 2 from stage 1): a new run takes the policy weights and normalizer of
