@@ -47,6 +47,33 @@ Mlp::Mlp(int in_dim, const MlpConfig& config, int out_dim) : activation_(config.
   num_params_ = off;
 }
 
+void Mlp::EmbedNarrower(const Mlp& narrow, const float* narrow_params, float* params,
+                        const std::string& ctx) const {
+  auto sizes = [](const std::vector<int>& v) {
+    std::string s;
+    for (int x : v) s += (s.empty() ? "" : "-") + std::to_string(x);
+    return s;
+  };
+  bool fits = narrow.activation_ == activation_ && narrow.sizes_.size() == sizes_.size() &&
+              narrow.in_dim() == in_dim() && narrow.out_dim() == out_dim();
+  for (size_t i = 0; fits && i < sizes_.size(); ++i) fits = narrow.sizes_[i] <= sizes_[i];
+  if (!fits) {
+    throw ConfigError(ctx + ": cannot widen a " + sizes(narrow.sizes_) + " " +
+                      ActivationName(narrow.activation_) + " MLP into " + sizes(sizes_) + " " +
+                      ActivationName(activation_) +
+                      " (same activation, depth, input and output needed, no layer narrower)");
+  }
+  for (int l = 0; l < num_layers(); ++l) {
+    const int n_out = narrow.sizes_[l + 1], n_in = narrow.sizes_[l];
+    Eigen::Map<MatrixXf> w(params + w_offset_[l], sizes_[l + 1], sizes_[l]);
+    Eigen::Map<const MatrixXf> nw(narrow_params + narrow.w_offset_[l], n_out, n_in);
+    w.topLeftCorner(n_out, n_in) = nw;
+    w.topRightCorner(n_out, sizes_[l] - n_in).setZero();  // from the extra units below
+    Eigen::Map<VectorXf>(params + b_offset_[l], n_out) =
+        Eigen::Map<const VectorXf>(narrow_params + narrow.b_offset_[l], n_out);
+  }
+}
+
 int Mlp::max_width() const { return *std::max_element(sizes_.begin(), sizes_.end()); }
 
 namespace {

@@ -69,6 +69,14 @@ class Mlp {
   // One input, no allocation: x [in_dim] -> out [out_dim]. scratch needs 2 * max_width() floats.
   void ForwardOne(const float* params, const float* x, float* out, float* scratch) const;
 
+  // Net2WiderNet (Chen et al. 2016): writes into params (this MLP's layout, already initialised)
+  // the function of `narrow` (same activation, depth, input and output sizes; no hidden layer
+  // wider than ours): its weights and biases in the leading rows and columns, zero weights out of
+  // the extra units. The extra units keep their initial incoming weights, so they start to learn
+  // at once while the output stays what `narrow` computes. ConfigError naming ctx otherwise.
+  void EmbedNarrower(const Mlp& narrow, const float* narrow_params, float* params,
+                     const std::string& ctx) const;
+
  private:
   std::vector<int> sizes_;
   std::vector<int> w_offset_;  // per layer, into params

@@ -289,6 +289,68 @@ void ActorCritic::CheckShape(const proto::PolicyShape& blob, const std::string& 
   differs("num_params", std::to_string(blob.num_params()), std::to_string(mine.num_params()));
 }
 
+PolicyConfig PolicyConfigFromShape(const proto::PolicyShape& s, const std::string& ctx) {
+  PolicyConfig c;
+  if (s.kind() == "gaussian") {
+    c.kind = PolicyKind::kGaussian;
+  } else if (s.kind() == "meta") {
+    c.kind = PolicyKind::kMeta;
+  } else {
+    throw ConfigError(ctx + ".shape.kind: unknown \"" + s.kind() + "\"");
+  }
+  c.obs_dim = s.obs_dim();
+  c.act_dim = s.act_dim();
+  c.num_choices = s.num_choices();
+  c.target_choice = s.target_choice();
+  c.policy_net.hidden.assign(s.policy_hidden().begin(), s.policy_hidden().end());
+  c.value_net.hidden.assign(s.value_hidden().begin(), s.value_hidden().end());
+  c.policy_net.activation = c.value_net.activation =
+      ParseActivation(s.activation(), ctx + ".shape.activation");
+  if (s.std_mode() == "trained") {
+    c.std_mode = StdMode::kTrained;
+  } else if (s.std_mode() == "fixed") {
+    c.std_mode = StdMode::kFixed;
+  } else {
+    throw ConfigError(ctx + ".shape.std_mode: unknown \"" + s.std_mode() + "\"");
+  }
+  return c;
+}
+
+proto::ModelWeights WidenModelWeights(const proto::ModelWeights& narrow, const PolicyConfig& wide,
+                                      uint64_t seed, const std::string& ctx) {
+  const PolicyConfig nc = PolicyConfigFromShape(narrow.shape(), ctx);
+  const ActorCritic small(nc, 0);
+  if (narrow.params_size() != small.num_params()) {
+    throw ConfigError(ctx + ": params has " + std::to_string(narrow.params_size()) +
+                      " values, its shape needs " + std::to_string(small.num_params()));
+  }
+  ActorCritic big(wide, seed);
+  // Everything but the hidden widths must agree.
+  proto::PolicyShape a, b;
+  small.GetShape(&a);
+  big.GetShape(&b);
+  for (proto::PolicyShape* s : {&a, &b}) {
+    s->clear_policy_hidden();
+    s->clear_value_hidden();
+    s->clear_num_params();
+  }
+  if (a.SerializeAsString() != b.SerializeAsString()) {
+    throw ConfigError(ctx + ": cannot widen: the networks differ in more than hidden widths (" +
+                      a.ShortDebugString() + " vs " + b.ShortDebugString() + ")");
+  }
+  const float* np = narrow.params().data();
+  float* p = big.params().data();
+  big.policy_mlp().EmbedNarrower(small.policy_mlp(), np, p, ctx + ": policy");
+  big.value_mlp().EmbedNarrower(small.value_mlp(), np + small.value_offset(),
+                                p + big.value_offset(), ctx + ": value");
+  std::copy(np + small.log_std_offset(), np + small.log_std_offset() + nc.act_dim,
+            p + big.log_std_offset());
+  proto::ModelWeights out = narrow;
+  big.GetShape(out.mutable_shape());
+  out.mutable_params()->Assign(big.params().data(), big.params().data() + big.num_params());
+  return out;
+}
+
 PolicyRunner::PolicyRunner(const PolicyConfig& config, const NormalizerConfig& norm_config)
     : model_(config, 0),
       normalizer_(config.obs_dim, norm_config),

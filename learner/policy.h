@@ -120,6 +120,16 @@ class ActorCritic {
   VectorXf mask_;
 };
 
+// The network config a ModelWeights' shape describes (ConfigError naming ctx on bad values).
+PolicyConfig PolicyConfigFromShape(const proto::PolicyShape& shape, const std::string& ctx);
+
+// The policy of `narrow` in a network with wider hidden layers (`wide`; the extra units
+// initialised from `seed`): the same actions, log-std, value and observation statistics, so
+// fine-tuning goes on from where `narrow` was with more capacity (Mlp::EmbedNarrower). ConfigError
+// naming ctx when `wide` differs in anything but hidden widths, or is narrower anywhere.
+proto::ModelWeights WidenModelWeights(const proto::ModelWeights& narrow, const PolicyConfig& wide,
+                                      uint64_t seed, const std::string& ctx);
+
 // What an actor runs every control step: one observation in, action + log-prob + value out,
 // no allocation per step. One runner per thread (it owns scratch buffers).
 //

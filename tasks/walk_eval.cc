@@ -83,33 +83,6 @@ proto::ModelWeights LoadModelFile(const std::string& path) {
                     std::to_string(bytes.size()) + " bytes; corrupt or another format)");
 }
 
-PolicyConfig PolicyConfigFromShape(const proto::PolicyShape& s, const std::string& ctx) {
-  PolicyConfig c;
-  if (s.kind() == "gaussian") {
-    c.kind = PolicyKind::kGaussian;
-  } else if (s.kind() == "meta") {
-    c.kind = PolicyKind::kMeta;
-  } else {
-    throw ConfigError(ctx + ".shape.kind: unknown \"" + s.kind() + "\"");
-  }
-  c.obs_dim = s.obs_dim();
-  c.act_dim = s.act_dim();
-  c.num_choices = s.num_choices();
-  c.target_choice = s.target_choice();
-  c.policy_net.hidden.assign(s.policy_hidden().begin(), s.policy_hidden().end());
-  c.value_net.hidden.assign(s.value_hidden().begin(), s.value_hidden().end());
-  c.policy_net.activation = c.value_net.activation =
-      ParseActivation(s.activation(), ctx + ".shape.activation");
-  if (s.std_mode() == "trained") {
-    c.std_mode = StdMode::kTrained;
-  } else if (s.std_mode() == "fixed") {
-    c.std_mode = StdMode::kFixed;
-  } else {
-    throw ConfigError(ctx + ".shape.std_mode: unknown \"" + s.std_mode() + "\"");
-  }
-  return c;
-}
-
 Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& weights,
                   const WalkEvalOptions& o, WalkEvalRecording* rec) {
   if (config_in.env.task != "walk")

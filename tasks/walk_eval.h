@@ -19,8 +19,6 @@ namespace perch {
 // cluster checkpoint ("PERCHCKP" frame around perch.proto.Checkpoint, learner/service/checkpoint.h:
 // its trainer.model). ConfigError naming the file on anything else (corrupt, truncated, empty).
 proto::ModelWeights LoadModelFile(const std::string& path);
-// The network config a ModelWeights' shape describes (ConfigError naming ctx on bad values).
-PolicyConfig PolicyConfigFromShape(const proto::PolicyShape& shape, const std::string& ctx);
 
 struct WalkEvalOptions {
   int episodes = 10;

@@ -196,6 +196,15 @@ void LearnerService::InitFrom() {
   // Weights and normalizer only; the new run counts its own updates from 0.
   proto::ModelWeights w = c.trainer().model();
   w.set_version(0);
+  // A run configured with wider hidden layers starts from the same function (Net2WiderNet).
+  const PolicyConfig& mine = ppo_->model().config();
+  const auto& sh = w.shape();
+  const std::vector<int> ph(sh.policy_hidden().begin(), sh.policy_hidden().end());
+  const std::vector<int> vh(sh.value_hidden().begin(), sh.value_hidden().end());
+  if (ph != mine.policy_net.hidden || vh != mine.value_net.hidden) {
+    w = WidenModelWeights(w, mine, setup_.seed, ctx);
+    spdlog::info("learner: {} widened to this run's hidden layers (same policy and value)", ctx);
+  }
   ppo_->ImportWeights(w, ctx);  // ConfigError on another network shape or observation size
   spdlog::info("learner: new run initialised from {} (update {}, {} samples of training)", path,
                c.counters().updates(), c.counters().samples());

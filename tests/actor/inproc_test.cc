@@ -164,6 +164,53 @@ TEST(InprocTest, NewRunStartsFromInitFromCheckpointWeights) {
   }
 }
 
+// A run configured with wider hidden layers starts from another run's policy widened
+// (Net2WiderNet: the same function, more units); a narrower one is refused by name.
+TEST(InprocTest, InitFromIntoWiderLayersKeepsThePolicy) {
+  std::string src_dir;
+  ASSERT_EQ(RunInproc("widen-src", 2, 1, &src_dir).learner_updates, 2u);
+  const std::string src_ckpt = src_dir + "/checkpoints/ckpt-0000000002.bin";
+  const proto::ModelWeights a = ReadCheckpointFile(src_ckpt).trainer().model();
+  Json j = MockConfig(Json{{"init_from", src_ckpt}});
+  j["policy"] = {{"policy_net", {{"hidden", {96, 64}}}}, {"value_net", {{"hidden", {64, 80}}}}};
+  zmq::context_t ctx(1);
+  proto::ModelWeights b;
+  {
+    LearnerService learner(ctx, MakeLearnerSetup(ExperimentConfigFromJson(j, "wide")),
+                           InprocOptions("widen-dst", TempDir("widen-dst") + "/run"));
+    b = ReadCheckpointFile(learner.SaveCheckpoint()).trainer().model();
+  }
+  ASSERT_EQ(b.shape().policy_hidden_size(), 2);
+  EXPECT_EQ(b.shape().policy_hidden(0), 96);
+  EXPECT_EQ(b.shape().value_hidden(1), 80);
+  EXPECT_GT(b.params_size(), a.params_size());
+  // Same function: equal deterministic actions and values on a few observations.
+  PolicyRunner ra(PolicyConfigFromShape(a.shape(), "a"), NormalizerConfig());
+  PolicyRunner rb(PolicyConfigFromShape(b.shape(), "b"), NormalizerConfig());
+  ra.LoadWeights(a);
+  rb.LoadWeights(b);
+  ra.set_update_obs_stats(false);
+  rb.set_update_obs_stats(false);
+  Rng rng(4), r1(0), r2(0);
+  const int obs_dim = a.shape().obs_dim(), act = a.shape().act_dim();
+  std::vector<float> obs(obs_dim), xa(act), xb(act);
+  for (int t = 0; t < 5; ++t) {
+    for (float& x : obs) x = static_cast<float>(rng.Normal());
+    EXPECT_NEAR(ra.Act(obs.data(), r1, true, nullptr, xa.data()).value,
+                rb.Act(obs.data(), r2, true, nullptr, xb.data()).value, 1e-4);
+    for (int k = 0; k < act; ++k) EXPECT_NEAR(xa[k], xb[k], 1e-5) << k;
+  }
+
+  j["policy"] = {{"policy_net", {{"hidden", {32, 64}}}}};
+  try {
+    LearnerService learner(ctx, MakeLearnerSetup(ExperimentConfigFromJson(j, "narrow")),
+                           InprocOptions("widen-narrow", TempDir("widen-narrow") + "/run"));
+    FAIL() << "a narrower network was initialised from a wider one";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("cannot widen"), std::string::npos) << e.what();
+  }
+}
+
 // A resume with the same config rewrites config.json in place; one with a changed config (a lower
 // learning rate for the last stretch) keeps the earlier config under the update it ended at.
 TEST(InprocTest, ResumeWithAChangedConfigKeepsTheEarlierOne) {

@@ -6,8 +6,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <string>
 #include <vector>
 
+#include "common/proto/model.pb.h"
 #include "learner/ppo.h"
 
 namespace perch {
@@ -180,6 +182,85 @@ TEST(StdModeTest, FixedSigmaNeverMovesTrainedSigmaDoes) {
       EXPECT_GT((ls - VectorXf::Constant(2, -0.3f)).norm(), 1e-5f);
     }
   }
+}
+
+}  // namespace
+}  // namespace perch
+
+namespace perch {
+namespace {
+
+// A narrow model with every parameter and statistic away from its init, so that a widening that
+// dropped or misplaced any block would change the outputs.
+proto::ModelWeights PerturbedNarrow() {
+  PpoLearner learner(PolicyConfig::Subtask(52), PpoConfig::Subtask(), 3);
+  proto::ModelWeights w;
+  learner.ExportWeights(&w);
+  Rng rng(17);
+  for (int k = 0; k < w.params_size(); ++k) w.set_params(k, static_cast<float>(rng.Normal(0, 0.3)));
+  for (int d = 0; d < 52; ++d) {
+    w.mutable_obs_stats()->set_mean(d, rng.Normal(0, 1));
+    w.mutable_obs_stats()->set_var(d, 0.5 + rng.Uniform());
+  }
+  w.mutable_obs_stats()->set_count(1e6);
+  return w;
+}
+
+TEST(WidenTest, WiderNetworkActsAndValuesAsTheNarrowOne) {
+  const proto::ModelWeights narrow = PerturbedNarrow();
+  PolicyConfig wide = PolicyConfig::Subtask(52);
+  wide.policy_net.hidden = {96, 128};
+  wide.value_net.hidden = {80, 64};
+  const proto::ModelWeights w = WidenModelWeights(narrow, wide, 5, "test");
+  const ActorCritic big(wide, 0);
+  ASSERT_EQ(w.params_size(), big.num_params());
+  EXPECT_EQ(w.shape().policy_hidden(1), 128);
+  EXPECT_EQ(w.obs_stats().SerializeAsString(), narrow.obs_stats().SerializeAsString());
+
+  PolicyRunner a(PolicyConfigFromShape(narrow.shape(), "narrow"), NormalizerConfig());
+  PolicyRunner b(wide, NormalizerConfig());
+  a.LoadWeights(narrow);
+  b.LoadWeights(w);
+  a.set_update_obs_stats(false);
+  b.set_update_obs_stats(false);
+  Rng rng(9), ra(1), rb(1);
+  std::vector<float> obs(52), act_a(21), act_b(21);
+  for (int trial = 0; trial < 20; ++trial) {
+    for (float& x : obs) x = static_cast<float>(rng.Normal(0, 2));
+    const auto oa = a.Act(obs.data(), ra, true, nullptr, act_a.data());
+    const auto ob = b.Act(obs.data(), rb, true, nullptr, act_b.data());
+    EXPECT_NEAR(oa.value, ob.value, 1e-4f * (1 + std::abs(oa.value)));
+    EXPECT_NEAR(oa.log_prob, ob.log_prob, 1e-3f);
+    for (int k = 0; k < 21; ++k) EXPECT_NEAR(act_a[k], act_b[k], 1e-4f) << k;
+  }
+  // The extra units are live (initialised incoming weights), so they can learn.
+  Eigen::Map<const MatrixXf> w0(w.params().data(), 96, 52);
+  EXPECT_GT(w0.bottomRows(32).norm(), 1.0f);
+}
+
+TEST(WidenTest, RefusesAnythingButWiderHiddenLayers) {
+  const proto::ModelWeights narrow = PerturbedNarrow();
+  auto refused = [&](const PolicyConfig& c, const std::string& what) {
+    try {
+      WidenModelWeights(narrow, c, 0, "init");
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+      return true;
+    }
+    return false;
+  };
+  PolicyConfig c = PolicyConfig::Subtask(52);
+  c.policy_net.hidden = {32, 64};
+  EXPECT_TRUE(refused(c, "cannot widen a 52-64-64-21"));
+  c.policy_net.hidden = {64, 64, 64};
+  EXPECT_TRUE(refused(c, "cannot widen"));
+  c = PolicyConfig::Subtask(52);
+  c.value_net.activation = Activation::kRelu;
+  EXPECT_TRUE(refused(c, "cannot widen"));
+  EXPECT_TRUE(refused(PolicyConfig::Subtask(57), "more than hidden widths"));
+  // The same widths are a valid (identity) widening.
+  EXPECT_EQ(WidenModelWeights(narrow, PolicyConfig::Subtask(52), 0, "same").SerializeAsString(),
+            narrow.SerializeAsString());
 }
 
 }  // namespace
