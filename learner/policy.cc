@@ -14,6 +14,18 @@ constexpr float kLog2Pi = 1.8378770664093453f;  // log(2 pi)
 std::string KindName(PolicyKind k) { return k == PolicyKind::kMeta ? "meta" : "gaussian"; }
 std::string StdModeName(StdMode m) { return m == StdMode::kFixed ? "fixed" : "trained"; }
 
+// `field` names where the value came from, for the error.
+PolicyKind ParseKind(const std::string& s, const std::string& field) {
+  if (s == "gaussian") return PolicyKind::kGaussian;
+  if (s == "meta") return PolicyKind::kMeta;
+  throw ConfigError(field + ": unknown policy kind '" + s + "' (expected gaussian or meta)");
+}
+StdMode ParseStdMode(const std::string& s, const std::string& field) {
+  if (s == "trained") return StdMode::kTrained;
+  if (s == "fixed") return StdMode::kFixed;
+  throw ConfigError(field + ": unknown '" + s + "' (expected trained or fixed)");
+}
+
 // Index of the largest entry (first on ties).
 int ArgMax(const float* x, int n) { return static_cast<int>(std::max_element(x, x + n) - x); }
 
@@ -60,12 +72,7 @@ PolicyConfig PolicyConfigFromJson(const Json& j, const std::string& ctx) {
   PolicyConfig c;
   std::string kind = KindName(c.kind);
   GetOptional(j, "kind", kind, ctx);
-  if (kind == "meta") {
-    c = PolicyConfig::Meta();
-  } else if (kind != "gaussian") {
-    throw ConfigError(ctx + ".kind: unknown policy kind '" + kind +
-                      "' (expected gaussian or meta)");
-  }
+  if (ParseKind(kind, ctx + ".kind") == PolicyKind::kMeta) c = PolicyConfig::Meta();
   GetOptional(j, "obs_dim", c.obs_dim, ctx);
   GetOptional(j, "act_dim", c.act_dim, ctx);
   GetOptional(j, "num_choices", c.num_choices, ctx);
@@ -75,13 +82,7 @@ PolicyConfig PolicyConfigFromJson(const Json& j, const std::string& ctx) {
   if (j.contains("value_net")) c.value_net = MlpConfigFromJson(j["value_net"], ctx + ".value_net");
   std::string std_mode = StdModeName(c.std_mode);
   GetOptional(j, "std_mode", std_mode, ctx);
-  if (std_mode == "fixed") {
-    c.std_mode = StdMode::kFixed;
-  } else if (std_mode == "trained") {
-    c.std_mode = StdMode::kTrained;
-  } else {
-    throw ConfigError(ctx + ".std_mode: unknown '" + std_mode + "' (expected trained or fixed)");
-  }
+  c.std_mode = ParseStdMode(std_mode, ctx + ".std_mode");
   GetOptional(j, "init_log_std", c.init_log_std, ctx);
   GetOptional(j, "hidden_gain", c.hidden_gain, ctx);
   GetOptional(j, "policy_out_gain", c.policy_out_gain, ctx);
@@ -291,13 +292,7 @@ void ActorCritic::CheckShape(const proto::PolicyShape& blob, const std::string& 
 
 PolicyConfig PolicyConfigFromShape(const proto::PolicyShape& s, const std::string& ctx) {
   PolicyConfig c;
-  if (s.kind() == "gaussian") {
-    c.kind = PolicyKind::kGaussian;
-  } else if (s.kind() == "meta") {
-    c.kind = PolicyKind::kMeta;
-  } else {
-    throw ConfigError(ctx + ".shape.kind: unknown \"" + s.kind() + "\"");
-  }
+  c.kind = ParseKind(s.kind(), ctx + ".shape.kind");
   c.obs_dim = s.obs_dim();
   c.act_dim = s.act_dim();
   c.num_choices = s.num_choices();
@@ -306,13 +301,7 @@ PolicyConfig PolicyConfigFromShape(const proto::PolicyShape& s, const std::strin
   c.value_net.hidden.assign(s.value_hidden().begin(), s.value_hidden().end());
   c.policy_net.activation = c.value_net.activation =
       ParseActivation(s.activation(), ctx + ".shape.activation");
-  if (s.std_mode() == "trained") {
-    c.std_mode = StdMode::kTrained;
-  } else if (s.std_mode() == "fixed") {
-    c.std_mode = StdMode::kFixed;
-  } else {
-    throw ConfigError(ctx + ".shape.std_mode: unknown \"" + s.std_mode() + "\"");
-  }
+  c.std_mode = ParseStdMode(s.std_mode(), ctx + ".shape.std_mode");
   return c;
 }
 
