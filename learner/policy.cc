@@ -12,7 +12,6 @@ namespace {
 constexpr float kLog2Pi = 1.8378770664093453f;  // log(2 pi)
 
 std::string KindName(PolicyKind k) { return k == PolicyKind::kMeta ? "meta" : "gaussian"; }
-std::string StdModeName(StdMode m) { return m == StdMode::kFixed ? "fixed" : "trained"; }
 
 // `field` names where the value came from, for the error.
 PolicyKind ParseKind(const std::string& s, const std::string& field) {
@@ -30,6 +29,8 @@ StdMode ParseStdMode(const std::string& s, const std::string& field) {
 int ArgMax(const float* x, int n) { return static_cast<int>(std::max_element(x, x + n) - x); }
 
 }  // namespace
+
+std::string StdModeName(StdMode m) { return m == StdMode::kFixed ? "fixed" : "trained"; }
 
 PolicyConfig PolicyConfig::Subtask(int obs_dim) {
   PolicyConfig c;
@@ -337,6 +338,22 @@ proto::ModelWeights WidenModelWeights(const proto::ModelWeights& narrow, const P
   proto::ModelWeights out = narrow;
   big.GetShape(out.mutable_shape());
   out.mutable_params()->Assign(big.params().data(), big.params().data() + big.num_params());
+  return out;
+}
+
+proto::ModelWeights ConvertStdMode(const proto::ModelWeights& w, const PolicyConfig& mine,
+                                   const std::string& ctx) {
+  proto::ModelWeights out = w;
+  out.mutable_shape()->set_std_mode(StdModeName(mine.std_mode));
+  if (mine.std_mode != StdMode::kFixed) return out;
+  const ActorCritic src(PolicyConfigFromShape(w.shape(), ctx), 0);
+  if (w.params_size() != src.num_params()) {
+    throw ConfigError(ctx + ": params has " + std::to_string(w.params_size()) +
+                      " values, its shape needs " + std::to_string(src.num_params()));
+  }
+  for (int i = 0; i < src.act_dim(); ++i) {
+    out.set_params(src.log_std_offset() + i, mine.init_log_std);
+  }
   return out;
 }
 

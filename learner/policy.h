@@ -32,6 +32,7 @@ enum class PolicyKind { kGaussian, kMeta };
 // kTrained: state-independent log-std trained with the policy (authors' code, notes §8.1).
 // kFixed: sigma = exp(init_log_std), never trained (the paper's "fixed diagonal covariance", §4).
 enum class StdMode { kTrained, kFixed };
+std::string StdModeName(StdMode m);  // "trained" / "fixed", as in configs and shapes
 
 struct PolicyConfig {
   PolicyKind kind = PolicyKind::kGaussian;
@@ -129,6 +130,13 @@ PolicyConfig PolicyConfigFromShape(const proto::PolicyShape& shape, const std::s
 // naming ctx when `wide` differs in anything but hidden widths, or is narrower anywhere.
 proto::ModelWeights WidenModelWeights(const proto::ModelWeights& narrow, const PolicyConfig& wide,
                                       uint64_t seed, const std::string& ctx);
+
+// `w` with the std mode of `mine` (a fine-tune that freezes or frees sigma): into a fixed-sigma
+// network the log-std becomes mine.init_log_std for every action dimension (what fixed means);
+// into a trained one the source's log-std is kept as the starting point. Other shape fields are
+// left for CheckShape / WidenModelWeights to judge.
+proto::ModelWeights ConvertStdMode(const proto::ModelWeights& w, const PolicyConfig& mine,
+                                   const std::string& ctx);
 
 // What an actor runs every control step: one observation in, action + log-prob + value out,
 // no allocation per step. One runner per thread (it owns scratch buffers).

@@ -211,6 +211,32 @@ TEST(InprocTest, InitFromIntoWiderLayersKeepsThePolicy) {
   }
 }
 
+// A fine-tune that freezes sigma (std_mode fixed) starts from the source's policy with the
+// run's own sigma; the means and values are the source's.
+TEST(InprocTest, InitFromIntoFixedSigmaTakesTheRunsSigma) {
+  std::string src_dir;
+  ASSERT_EQ(RunInproc("fix-src", 2, 1, &src_dir).learner_updates, 2u);
+  const std::string src_ckpt = src_dir + "/checkpoints/ckpt-0000000002.bin";
+  const proto::ModelWeights a = ReadCheckpointFile(src_ckpt).trainer().model();
+  Json j = MockConfig(Json{{"init_from", src_ckpt}});
+  j["policy"] = {{"std_mode", "fixed"}, {"init_log_std", -2.5}};
+  zmq::context_t ctx(1);
+  LearnerService learner(ctx, MakeLearnerSetup(ExperimentConfigFromJson(j, "fixed")),
+                         InprocOptions("fix-dst", TempDir("fix-dst") + "/run"));
+  const proto::ModelWeights b = ReadCheckpointFile(learner.SaveCheckpoint()).trainer().model();
+  EXPECT_EQ(b.shape().std_mode(), "fixed");
+  ASSERT_EQ(b.params_size(), a.params_size());
+  const int off = ActorCritic(PolicyConfigFromShape(b.shape(), "b"), 0).log_std_offset();
+  const int act = b.shape().act_dim();
+  for (int k = 0; k < b.params_size(); ++k) {
+    if (k >= off && k < off + act) {
+      EXPECT_FLOAT_EQ(b.params(k), -2.5f) << k;
+    } else {
+      EXPECT_EQ(b.params(k), a.params(k)) << k;
+    }
+  }
+}
+
 // A resume with the same config rewrites config.json in place; one with a changed config (a lower
 // learning rate for the last stretch) keeps the earlier config under the update it ended at.
 TEST(InprocTest, ResumeWithAChangedConfigKeepsTheEarlierOne) {

@@ -263,5 +263,36 @@ TEST(WidenTest, RefusesAnythingButWiderHiddenLayers) {
             narrow.SerializeAsString());
 }
 
+// Freezing sigma for a fine-tune: every log-std becomes the run's init_log_std, nothing else
+// moves; freeing it again keeps the values as the start. The result loads into the new network.
+TEST(ConvertStdModeTest, FixedTakesTheRunsSigmaTrainedKeepsTheSources) {
+  const proto::ModelWeights src = PerturbedNarrow();
+  PolicyConfig fixed = PolicyConfig::Subtask(52);
+  fixed.std_mode = StdMode::kFixed;
+  fixed.init_log_std = -2.3f;
+  const proto::ModelWeights w = ConvertStdMode(src, fixed, "freeze");
+  const ActorCritic net(fixed, 0);
+  ASSERT_EQ(w.params_size(), src.params_size());
+  EXPECT_EQ(w.shape().std_mode(), "fixed");
+  int changed = 0;
+  for (int k = 0; k < w.params_size(); ++k) {
+    const bool is_log_std = k >= net.log_std_offset() && k < net.log_std_offset() + 21;
+    if (is_log_std) {
+      EXPECT_FLOAT_EQ(w.params(k), -2.3f) << k;
+    } else {
+      EXPECT_EQ(w.params(k), src.params(k)) << k;
+    }
+    changed += w.params(k) != src.params(k);
+  }
+  EXPECT_EQ(changed, 21);
+  PpoLearner learner(fixed, PpoConfig::Subtask(), 0);
+  EXPECT_NO_THROW(learner.ImportWeights(w, "freeze"));
+  EXPECT_THROW(learner.ImportWeights(src, "unconverted"), ConfigError);
+
+  const proto::ModelWeights back = ConvertStdMode(w, PolicyConfig::Subtask(52), "free");
+  EXPECT_EQ(back.shape().std_mode(), "trained");
+  for (int k = 0; k < w.params_size(); ++k) EXPECT_EQ(back.params(k), w.params(k)) << k;
+}
+
 }  // namespace
 }  // namespace perch
