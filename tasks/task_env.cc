@@ -1,5 +1,7 @@
 #include "tasks/task_env.h"
 
+#include "tasks/fall_restart.h"
+
 namespace perch {
 
 TaskEnvConfig TaskEnvConfig::Defaults(const std::string& task) {
@@ -50,6 +52,13 @@ std::unique_ptr<HumanoidChairEnv> MakeTaskHumanoidEnv(const TaskEnvConfig& confi
 }
 
 std::unique_ptr<Env> MakeTaskEnv(const TaskEnvConfig& config) {
+  if (config.env.task == "walk" && config.walk.fall_restart_prob > 0) {
+    auto task = std::make_unique<WalkTask>(config.walk, config.env.physics.physics_dt *
+                                                            config.env.physics.substeps);
+    WalkTask* t = task.get();
+    return std::make_unique<FallRestartEnv>(
+        std::make_unique<HumanoidChairEnv>(config.env, std::move(task)), t, config.walk);
+  }
   return MakeTaskHumanoidEnv(config);
 }
 

@@ -30,7 +30,9 @@ struct TaskEnvConfig {
 
 std::unique_ptr<Task> MakeTaskFor(const TaskEnvConfig& config);
 std::unique_ptr<HumanoidChairEnv> MakeTaskHumanoidEnv(const TaskEnvConfig& config);
-// Same interface and behaviour as MakeEnv(config.env) for "stand"; adds the tasks of tasks/.
+// Same interface and behaviour as MakeEnv(config.env) for "stand"; adds the tasks of tasks/. A
+// walk config with fall_restart_prob > 0 gets the training curriculum (FallRestartEnv); eval and
+// tools that need the HumanoidChairEnv itself use MakeTaskHumanoidEnv, which never adds it.
 std::unique_ptr<Env> MakeTaskEnv(const TaskEnvConfig& config);
 
 }  // namespace perch

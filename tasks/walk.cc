@@ -41,7 +41,8 @@ WalkTaskConfig WalkTaskConfig::FromJson(const Json& j, const std::string& ctx) {
                   "root_vel_alpha", "target_weight", "target_k", "min_root_z", "max_episode_steps",
                   "reference_state_init", "target_redraw_s", "target_reach_m", "target_min_dist_m",
                   "target_max_dist_m", "target_max_angle_deg", "target_turn_prob",
-                  "target_turn_max_angle_deg", "forward_target"},
+                  "target_turn_max_angle_deg", "fall_restart_prob", "fall_restart_lead_s",
+                  "fall_restart_pool", "forward_target"},
                  ctx);
   WalkTaskConfig c;
   std::string variant = c.reward_variant;
@@ -75,6 +76,9 @@ WalkTaskConfig WalkTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "target_max_angle_deg", c.target_max_angle_deg, ctx);
   GetOptional(j, "target_turn_prob", c.target_turn_prob, ctx);
   GetOptional(j, "target_turn_max_angle_deg", c.target_turn_max_angle_deg, ctx);
+  GetOptional(j, "fall_restart_prob", c.fall_restart_prob, ctx);
+  GetOptional(j, "fall_restart_lead_s", c.fall_restart_lead_s, ctx);
+  GetOptional(j, "fall_restart_pool", c.fall_restart_pool, ctx);
   GetOptional(j, "forward_target", c.forward_target, ctx);
   if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
   if (!(c.target_redraw_s > 0)) throw ConfigError(ctx + ".target_redraw_s: must be > 0");
@@ -87,6 +91,13 @@ WalkTaskConfig WalkTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!(c.target_turn_max_angle_deg >= 0 && c.target_turn_max_angle_deg <= 180)) {
     throw ConfigError(ctx + ".target_turn_max_angle_deg: must be in [0, 180]");
   }
+  if (!(c.fall_restart_prob >= 0 && c.fall_restart_prob <= 1)) {
+    throw ConfigError(ctx + ".fall_restart_prob: must be in [0, 1]");
+  }
+  if (!(c.fall_restart_lead_s > 0 && c.fall_restart_lead_s <= 10)) {
+    throw ConfigError(ctx + ".fall_restart_lead_s: must be in (0, 10] s");
+  }
+  if (c.fall_restart_pool < 1) throw ConfigError(ctx + ".fall_restart_pool: must be >= 1");
   return c;
 }
 
@@ -109,6 +120,9 @@ Json WalkTaskConfig::ToJson() const {
               {"target_max_angle_deg", target_max_angle_deg},
               {"target_turn_prob", target_turn_prob},
               {"target_turn_max_angle_deg", target_turn_max_angle_deg},
+              {"fall_restart_prob", fall_restart_prob},
+              {"fall_restart_lead_s", fall_restart_lead_s},
+              {"fall_restart_pool", fall_restart_pool},
               {"forward_target", forward_target}};
 }
 
@@ -155,6 +169,36 @@ bool WalkTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState
   offset_ = Eigen::Vector3d(-start.root_pos.x(), -start.root_pos.y(), 0.0);
   *s = ReferenceState(0);
   return true;
+}
+
+WalkTask::Memory WalkTask::GetMemory() const {
+  Memory m;
+  m.t0 = t0_;
+  m.offset = offset_;
+  m.countdown = countdown_;
+  m.prev_distance = prev_distance_;
+  m.redrawn = redrawn_;
+  m.reached = reached_;
+  m.targets_reached = targets_reached_;
+  m.target_drawn_dist_m = target_drawn_dist_m_;
+  m.prev_q = prev_q_;
+  m.prev_root = prev_root_;
+  m.terms = terms_;
+  return m;
+}
+
+void WalkTask::SetMemory(const Memory& m) {
+  t0_ = m.t0;
+  offset_ = m.offset;
+  countdown_ = m.countdown;
+  prev_distance_ = m.prev_distance;
+  redrawn_ = m.redrawn;
+  reached_ = m.reached;
+  targets_reached_ = m.targets_reached;
+  target_drawn_dist_m_ = m.target_drawn_dist_m;
+  prev_q_ = m.prev_q;
+  prev_root_ = m.prev_root;
+  terms_ = m.terms;
 }
 
 double WalkTask::TargetDistance(const HumanoidChairEnv& env) {

@@ -55,6 +55,13 @@ struct WalkTaskConfig {
   // after passing a target at > target_reach_m) are practised. `perch eval` turns it off.
   double target_turn_prob = 0.0;
   double target_turn_max_angle_deg = 180.0;  // [deg]
+  // Training curriculum (ours, not the paper's; 0 = off = the paper): with this probability an
+  // episode starts from the state recorded fall_restart_lead_s before one of the env's recent
+  // falls (FallRestartEnv: pose, target, countdown and reference phase), so the situations that
+  // end in falls are practised more often than they occur. `perch eval` never uses it.
+  double fall_restart_prob = 0.0;
+  double fall_restart_lead_s = 1.5;  // how long before the fall [s]
+  int fall_restart_pool = 64;        // falls kept per env, the oldest replaced
   // Stage "forward": the goal feature points at this fixed world point (Roboschool's default) [m].
   std::array<double, 2> forward_target{1000.0, 0.0};
 
@@ -99,6 +106,24 @@ class WalkTask : public Task {
   double target_drawn_distance_m() const { return target_drawn_dist_m_; }
   // Horizontal distance body_xyz -> walk target [m].
   static double TargetDistance(const HumanoidChairEnv& env);
+
+  // What the task carries between steps; with the env's EnvState it continues an episode from
+  // any recorded point (FallRestartEnv).
+  struct Memory {
+    double t0 = 0.0;  // reference time at step 0 [s]
+    Eigen::Vector3d offset = Eigen::Vector3d::Zero();
+    int countdown = 0;
+    double prev_distance = 0.0;
+    bool redrawn = false, reached = false;
+    int targets_reached = 0;
+    double target_drawn_dist_m = 0.0;
+    std::array<double, HumanoidModel::kNumJoints> prev_q{};
+    Eigen::Vector3d prev_root = Eigen::Vector3d::Zero();
+    WalkTerms terms;
+  };
+  Memory GetMemory() const;
+  void SetMemory(const Memory& m);
+  double control_dt() const { return dt_; }
 
  private:
   void DrawTarget(HumanoidChairEnv& env, Rng& rng);
