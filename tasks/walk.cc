@@ -140,8 +140,8 @@ WalkTask::WalkTask(const WalkTaskConfig& config, double control_dt)
 }
 
 MotionPose WalkTask::ReferenceAt(int step) const {
-  MotionPose p = motion_.At(t0_ + step * dt_);
-  p.root_pos += offset_;
+  MotionPose p = motion_.At(m_.t0 + step * dt_);
+  p.root_pos += m_.offset;
   return p;
 }
 
@@ -163,42 +163,12 @@ HumanoidState WalkTask::ReferenceState(int step) const {
 }
 
 bool WalkTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) {
-  t0_ = c_.reference_state_init ? rng.Uniform(0.0, motion_.duration()) : 0.0;
-  const MotionPose start = motion_.At(t0_);
+  m_.t0 = c_.reference_state_init ? rng.Uniform(0.0, motion_.duration()) : 0.0;
+  const MotionPose start = motion_.At(m_.t0);
   // Root over the origin; the clip already faces +x (docs/motion.md), so no rotation.
-  offset_ = Eigen::Vector3d(-start.root_pos.x(), -start.root_pos.y(), 0.0);
+  m_.offset = Eigen::Vector3d(-start.root_pos.x(), -start.root_pos.y(), 0.0);
   *s = ReferenceState(0);
   return true;
-}
-
-WalkTask::Memory WalkTask::GetMemory() const {
-  Memory m;
-  m.t0 = t0_;
-  m.offset = offset_;
-  m.countdown = countdown_;
-  m.prev_distance = prev_distance_;
-  m.redrawn = redrawn_;
-  m.reached = reached_;
-  m.targets_reached = targets_reached_;
-  m.target_drawn_dist_m = target_drawn_dist_m_;
-  m.prev_q = prev_q_;
-  m.prev_root = prev_root_;
-  m.terms = terms_;
-  return m;
-}
-
-void WalkTask::SetMemory(const Memory& m) {
-  t0_ = m.t0;
-  offset_ = m.offset;
-  countdown_ = m.countdown;
-  prev_distance_ = m.prev_distance;
-  redrawn_ = m.redrawn;
-  reached_ = m.reached;
-  targets_reached_ = m.targets_reached;
-  target_drawn_dist_m_ = m.target_drawn_dist_m;
-  prev_q_ = m.prev_q;
-  prev_root_ = m.prev_root;
-  terms_ = m.terms;
 }
 
 double WalkTask::TargetDistance(const HumanoidChairEnv& env) {
@@ -217,34 +187,34 @@ void WalkTask::DrawTarget(HumanoidChairEnv& env, Rng& rng) {
   const double dist = rng.Uniform(c_.target_min_dist_m, c_.target_max_dist_m);
   const Eigen::Vector2d dir = Eigen::Rotation2Dd(theta) * heading;
   env.SetWalkTarget(s.root_pos.head<2>() + dist * dir);
-  target_drawn_dist_m_ = dist;
-  countdown_ = redraw_steps_;
+  m_.target_drawn_dist_m = dist;
+  m_.countdown = redraw_steps_;
 }
 
 void WalkTask::OnReset(HumanoidChairEnv& env, Rng& rng) {
   const HumanoidState& s = env.humanoid_state();
-  prev_q_ = s.q;
-  prev_root_ = s.root_pos;
-  targets_reached_ = 0;
-  redrawn_ = reached_ = false;
-  terms_ = WalkTerms();
+  m_.prev_q = s.q;
+  m_.prev_root = s.root_pos;
+  m_.targets_reached = 0;
+  m_.redrawn = m_.reached = false;
+  m_.terms = WalkTerms();
   if (c_.stage == WalkStage::kTarget) {
     DrawTarget(env, rng);
   } else {
     env.SetWalkTarget(Eigen::Vector2d(c_.forward_target[0], c_.forward_target[1]));
   }
-  prev_distance_ = TargetDistance(env);
+  m_.prev_distance = TargetDistance(env);
 }
 
 void WalkTask::BeforeObservation(HumanoidChairEnv& env, Rng& rng) {
-  redrawn_ = reached_ = false;
+  m_.redrawn = m_.reached = false;
   if (c_.stage != WalkStage::kTarget) return;
-  --countdown_;
-  reached_ = TargetDistance(env) < c_.target_reach_m;
-  if (reached_) ++targets_reached_;
-  if (reached_ || countdown_ <= 0) {
+  --m_.countdown;
+  m_.reached = TargetDistance(env) < c_.target_reach_m;
+  if (m_.reached) ++m_.targets_reached;
+  if (m_.reached || m_.countdown <= 0) {
     DrawTarget(env, rng);
-    redrawn_ = true;
+    m_.redrawn = true;
   }
 }
 
@@ -260,7 +230,7 @@ TaskStep WalkTask::OnStep(const HumanoidChairEnv& env, const float* /*action*/) 
 
   double qdot[n], qdot_ref[n];
   for (int j = 0; j < n; ++j) {
-    qdot[j] = fd ? (s.q[j] - prev_q_[j]) / dt_ : s.qd[j];
+    qdot[j] = fd ? (s.q[j] - m_.prev_q[j]) / dt_ : s.qd[j];
     qdot_ref[j] = fd ? (ref.q[j] - ref_prev.q[j]) / dt_ : ref.qdot[j];
   }
   WalkTerms t;
@@ -270,7 +240,7 @@ TaskStep WalkTask::OnStep(const HumanoidChairEnv& env, const float* /*action*/) 
 
   if (c_.stage == WalkStage::kForward) {
     const Eigen::Vector3d v =
-        fd ? Eigen::Vector3d((s.root_pos - prev_root_) / dt_) : s.root_lin_vel;
+        fd ? Eigen::Vector3d((s.root_pos - m_.prev_root) / dt_) : s.root_lin_vel;
     const Eigen::Vector3d v_ref =
         fd ? Eigen::Vector3d((ref.root_pos - ref_prev.root_pos) / dt_) : ref.root_vel;
     t.goal = RootVelocityReward(v.data(), v_ref.data(), c_.root_vel_weight, c_.root_vel_alpha);
@@ -278,15 +248,15 @@ TaskStep WalkTask::OnStep(const HumanoidChairEnv& env, const float* /*action*/) 
     const double d = TargetDistance(env);
     // After a re-draw the progress is reset: that step earns the sigmoid at V = 0 (notes 4.4).
     t.goal =
-        TargetProgressReward(redrawn_ ? d : prev_distance_, d, dt_, c_.target_weight, c_.target_k);
-    prev_distance_ = d;
+        TargetProgressReward(m_.redrawn ? d : m_.prev_distance, d, dt_, c_.target_weight, c_.target_k);
+    m_.prev_distance = d;
   }
-  t.target_redrawn = redrawn_;
-  t.target_reached = reached_;
+  t.target_redrawn = m_.redrawn;
+  t.target_reached = m_.reached;
   t.total = t.similarity + t.goal;
-  terms_ = t;
-  prev_q_ = s.q;
-  prev_root_ = s.root_pos;
+  m_.terms = t;
+  m_.prev_q = s.q;
+  m_.prev_root = s.root_pos;
 
   TaskStep r;
   r.reward = static_cast<float>(t.total);

@@ -99,19 +99,19 @@ class WalkTask : public Task {
   MotionPose ReferenceAt(int step) const;
   // As a HumanoidState (what perfect tracking would be).
   HumanoidState ReferenceState(int step) const;
-  double start_time() const { return t0_; }  // reference time at step 0 [s]
-  const WalkTerms& last_terms() const { return terms_; }
-  int targets_reached() const { return targets_reached_; }  // this episode
+  double start_time() const { return m_.t0; }  // reference time at step 0 [s]
+  const WalkTerms& last_terms() const { return m_.terms; }
+  int targets_reached() const { return m_.targets_reached; }  // this episode
   // The current target's distance from the root when it was drawn [m] (target stage).
-  double target_drawn_distance_m() const { return target_drawn_dist_m_; }
+  double target_drawn_distance_m() const { return m_.target_drawn_dist_m; }
   // Horizontal distance body_xyz -> walk target [m].
   static double TargetDistance(const HumanoidChairEnv& env);
 
   // What the task carries between steps; with the env's EnvState it continues an episode from
   // any recorded point (FallRestartEnv).
   struct Memory {
-    double t0 = 0.0;  // reference time at step 0 [s]
-    Eigen::Vector3d offset = Eigen::Vector3d::Zero();
+    double t0 = 0.0;                                   // reference time at step 0 [s]
+    Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // added to the reference's root position [m]
     int countdown = 0;
     double prev_distance = 0.0;
     bool redrawn = false, reached = false;
@@ -121,8 +121,8 @@ class WalkTask : public Task {
     Eigen::Vector3d prev_root = Eigen::Vector3d::Zero();
     WalkTerms terms;
   };
-  Memory GetMemory() const;
-  void SetMemory(const Memory& m);
+  const Memory& GetMemory() const { return m_; }
+  void SetMemory(const Memory& m) { m_ = m; }
   double control_dt() const { return dt_; }
 
  private:
@@ -131,17 +131,8 @@ class WalkTask : public Task {
   WalkTaskConfig c_;
   double dt_;
   ReferenceMotion motion_;
-  double t0_ = 0.0;
-  Eigen::Vector3d offset_ = Eigen::Vector3d::Zero();  // added to the reference's root position [m]
   int redraw_steps_ = 150;
-  int countdown_ = 0;
-  double prev_distance_ = 0.0;
-  bool redrawn_ = false, reached_ = false;
-  int targets_reached_ = 0;
-  double target_drawn_dist_m_ = 0.0;
-  std::array<double, HumanoidModel::kNumJoints> prev_q_{};
-  Eigen::Vector3d prev_root_ = Eigen::Vector3d::Zero();
-  WalkTerms terms_;
+  Memory m_;
 };
 
 }  // namespace perch
