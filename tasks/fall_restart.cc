@@ -17,8 +17,8 @@ FallRestartEnv::FallRestartEnv(std::unique_ptr<HumanoidChairEnv> env, WalkTask* 
     : env_(std::move(env)),
       task_(task),
       prob_(config.fall_restart_prob),
-      lead_steps_(std::max(1, static_cast<int>(std::lround(config.fall_restart_lead_s /
-                                                             task->control_dt())))),
+      lead_steps_(std::max(
+          1, static_cast<int>(std::lround(config.fall_restart_lead_s / task->control_dt())))),
       pool_cap_(config.fall_restart_pool),
       recent_(lead_steps_) {}
 

@@ -53,9 +53,8 @@ std::unique_ptr<HumanoidChairEnv> MakeTaskHumanoidEnv(const TaskEnvConfig& confi
 
 std::unique_ptr<Env> MakeTaskEnv(const TaskEnvConfig& config) {
   if (config.env.task == "walk" && config.walk.fall_restart_prob > 0) {
-    auto task = std::make_unique<WalkTask>(config.walk, config.env.physics.physics_dt *
-                                                            config.env.physics.substeps);
-    WalkTask* t = task.get();
+    std::unique_ptr<Task> task = MakeTaskFor(config);
+    auto* t = static_cast<WalkTask*>(task.get());  // MakeTaskFor builds a WalkTask for "walk"
     return std::make_unique<FallRestartEnv>(
         std::make_unique<HumanoidChairEnv>(config.env, std::move(task)), t, config.walk);
   }

@@ -200,11 +200,11 @@ void LearnerService::InitFrom() {
   const PolicyConfig& mine = ppo_->model().config();
   if (w.shape().std_mode() != StdModeName(mine.std_mode)) {
     w = ConvertStdMode(w, mine, ctx);
-    spdlog::info("learner: {}: sigma {} from here on{}", ctx, StdModeName(mine.std_mode),
-                 mine.std_mode == StdMode::kFixed
-                     ? fmt::format(" at exp({}) = {:.3f}", mine.init_log_std,
-                                   std::exp(mine.init_log_std))
-                     : std::string(" (starting from the source's log-std)"));
+    spdlog::info(
+        "learner: {}: sigma {} from here on{}", ctx, StdModeName(mine.std_mode),
+        mine.std_mode == StdMode::kFixed
+            ? fmt::format(" at exp({}) = {:.3f}", mine.init_log_std, std::exp(mine.init_log_std))
+            : std::string(" (starting from the source's log-std)"));
   }
   const auto& sh = w.shape();
   const std::vector<int> ph(sh.policy_hidden().begin(), sh.policy_hidden().end());
