@@ -30,9 +30,6 @@ void FallRestartEnv::Seed(uint64_t seed) {
 void FallRestartEnv::Record(const float* obs, Snapshot* s) const {
   s->env = env_->GetState();
   s->task = task_->GetMemory();
-  // A fresh time limit from the restart; the reference phase stays where it was.
-  s->task.t0 += s->env.step * task_->control_dt();
-  s->env.step = 0;
   s->obs.assign(obs, obs + env_->spec().obs_dim);
 }
 
@@ -59,11 +56,14 @@ StepResult FallRestartEnv::Step(const float* action, float* obs) {
   if (r.terminated && !r.invalid) {
     // The oldest state in the full ring is lead_steps_ before this fall (which is not recorded).
     if (recent_count_ == ring) {
-      const Snapshot& s = recent_[recent_next_];
+      Snapshot s = recent_[recent_next_];
+      // A fresh time limit from the restart; the reference phase stays where it was.
+      s.task.t0 += s.env.step * task_->control_dt();
+      s.env.step = 0;
       if (static_cast<int>(pool_.size()) < pool_cap_) {
-        pool_.push_back(s);
+        pool_.push_back(std::move(s));
       } else {
-        pool_[pool_next_] = s;
+        pool_[pool_next_] = std::move(s);
         pool_next_ = (pool_next_ + 1) % pool_cap_;
       }
       ++falls_recorded_;

@@ -34,8 +34,8 @@ class FallRestartEnv : public Env {
 
  private:
   struct Snapshot {
-    EnvState env;            // step rebased to 0
-    WalkTask::Memory task;   // t0 shifted by the rebased steps
+    EnvState env;            // in the pool: step rebased to 0
+    WalkTask::Memory task;   // in the pool: t0 shifted by the rebased steps
     std::vector<float> obs;  // [obs_dim] the observation the policy saw at that point
   };
   void Record(const float* obs, Snapshot* s) const;

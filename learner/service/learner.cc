@@ -196,8 +196,8 @@ void LearnerService::InitFrom() {
   // Weights and normalizer only; the new run counts its own updates from 0.
   proto::ModelWeights w = c.trainer().model();
   w.set_version(0);
-  // A run configured with wider hidden layers starts from the same function (Net2WiderNet).
   const PolicyConfig& mine = ppo_->model().config();
+  // A run that freezes or frees sigma takes the source's policy with its own std mode.
   if (w.shape().std_mode() != StdModeName(mine.std_mode)) {
     w = ConvertStdMode(w, mine, ctx);
     spdlog::info(
@@ -206,6 +206,7 @@ void LearnerService::InitFrom() {
             ? fmt::format(" at exp({}) = {:.3f}", mine.init_log_std, std::exp(mine.init_log_std))
             : std::string(" (starting from the source's log-std)"));
   }
+  // A run configured with wider hidden layers starts from the same function (Net2WiderNet).
   const auto& sh = w.shape();
   const std::vector<int> ph(sh.policy_hidden().begin(), sh.policy_hidden().end());
   const std::vector<int> vh(sh.value_hidden().begin(), sh.value_hidden().end());
