@@ -27,6 +27,26 @@ ExperimentConfig ExperimentConfigFromJson(const Json& j, const std::string& ctx)
   }
   c.ppo = j.contains("ppo") ? PpoConfigFromJson(j["ppo"], ctx + ".ppo") : PpoConfig::Subtask();
   if (j.contains("cluster")) c.cluster = ClusterConfigFromJson(j["cluster"], ctx + ".cluster");
+  if (c.env_backend == "bullet") {
+    // env.task and cluster.task name the same thing; a config where they differ would train one
+    // task under the other's name.
+    std::string env_task = "stand";
+    GetOptional(c.env, "task", env_task, ctx + ".env");
+    if (c.cluster.task == "meta" || c.cluster.hierarchy_enabled) {
+      throw ConfigError(ctx +
+                        (c.cluster.task == "meta" ? ".cluster.task: \"meta\""
+                                                  : ".cluster.hierarchy_enabled: true") +
+                        ": no env runs the hierarchy yet (the meta env is issue 15's work); the "
+                        "bullet backend trains one subtask at a time");
+    }
+    if (!j.contains("cluster") || !j["cluster"].contains("task")) {
+      c.cluster.task = env_task;  // derived when not given
+      TaskFromName(env_task, ctx + ".env.task");
+    } else if (c.cluster.task != env_task) {
+      throw ConfigError(ctx + ".cluster.task: \"" + c.cluster.task + "\" but env.task is \"" +
+                        env_task + "\" (they must name the same task)");
+    }
+  }
   return c;
 }
 

@@ -1,6 +1,8 @@
-// perch eval: evaluates a trained subtask policy (walk) over seeded episodes, optionally drawing a
-// filmstrip; perch train-local: bounded in-process PPO on a task env (no cluster), for comparisons.
+// perch eval: evaluates a trained subtask policy (any registered task) over seeded episodes,
+// optionally drawing a filmstrip; perch train-local: bounded in-process PPO on a task env (no
+// cluster), for comparisons.
 #include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <memory>
 #include <string>
@@ -11,7 +13,9 @@
 #include "learner/model_average.h"
 #include "learner/service/checkpoint.h"
 #include "tasks/local_train.h"
+#include "tasks/registry.h"
 #include "tasks/task_env.h"
+#include "tasks/task_eval.h"
 #include "tasks/walk_eval.h"
 #include "viz/filmstrip.h"
 
@@ -20,39 +24,116 @@ namespace {
 
 // Command-line overrides of a task config; empty / negative: keep the file's value.
 struct ConfigOverrides {
-  std::string task = "walk";
-  std::string config_path;  // empty: the task's defaults
-  std::string stage, variant, action_mode;
+  std::string task;         // empty: the config's task
+  std::string config_path;  // empty: the model's saved config, else the task's defaults
+  std::string stage, variant, action_mode, chair;
   std::string start;  // "fixed" or "reference"
   double target_turn_prob = -1.0;
 };
 
-// Task config: the file's when given, else the task's defaults; then the command-line overrides.
-TaskEnvConfig ResolveConfig(const ConfigOverrides& o) {
-  const std::string& task = o.task;
-  const std::string& config_path = o.config_path;
-  TaskEnvConfig c =
-      config_path.empty() ? TaskEnvConfig::Defaults(task) : TaskEnvConfig::Load(config_path);
-  if (c.env.task != task) {
-    throw ConfigError(config_path + ": task is \"" + c.env.task + "\", --task says \"" + task +
-                      "\"");
+// The experiment config saved with a model: a checkpoint's resolved config, or a run dir's
+// config.json. Null when the file carries none (a bare ModelWeights).
+Json SavedConfig(const std::string& model_path) {
+  namespace fs = std::filesystem;
+  if (fs::is_directory(model_path)) {
+    const fs::path cfg = fs::path(model_path) / "config.json";
+    return fs::exists(cfg) ? LoadJsonFile(cfg.string()) : Json();
   }
-  Json j = c.ToJson();
-  if (!o.stage.empty()) j["walk"]["stage"] = o.stage;
+  std::ifstream f(model_path, std::ios::binary);
+  char magic[8] = {};
+  if (!f.read(magic, 8) || std::string(magic, 8) != "PERCHCKP") return Json();
+  const proto::Checkpoint c = ReadCheckpointFile(model_path);
+  if (c.resolved_config_json().empty()) return Json();
+  try {
+    return Json::parse(c.resolved_config_json());
+  } catch (const std::exception& e) {
+    throw ConfigError(model_path + ": saved config does not parse: " + e.what());
+  }
+}
+
+// A run dir's newest checkpoint; any other path as given.
+std::string ModelFile(const std::string& model_path) {
+  namespace fs = std::filesystem;
+  if (!fs::is_directory(model_path)) return model_path;
+  std::string newest;
+  const fs::path dir = fs::path(model_path) / "checkpoints";
+  if (fs::is_directory(dir)) {
+    for (const auto& e : fs::directory_iterator(dir)) {
+      const std::string n = e.path().filename().string();
+      if (n.rfind("ckpt-", 0) == 0 && n.size() > 4 && n.substr(n.size() - 4) == ".bin" &&
+          (newest.empty() || n > fs::path(newest).filename().string())) {
+        newest = e.path().string();
+      }
+    }
+  }
+  if (newest.empty())
+    throw ConfigError(model_path + ": a directory without checkpoints/ckpt-*.bin");
+  return newest;
+}
+
+// Task config: --config's, else the model's saved one, else the task's defaults; then the
+// command-line overrides. Warns when --config's task section differs from the saved one.
+TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_path) {
+  const Json saved = model_path.empty() ? Json() : SavedConfig(model_path);
+  auto env_of = [](const Json& j) { return j.is_object() && j.contains("env") ? j["env"] : j; };
+  Json j;
+  std::string ctx;
+  if (!o.config_path.empty()) {
+    j = TaskEnvConfig::Load(o.config_path).ToJson();
+    ctx = o.config_path;
+    if (saved.is_object()) {
+      const Json s = TaskEnvConfig::FromJson(env_of(saved), model_path + " (saved)").ToJson();
+      const std::string t = s.value("task", "");
+      if (s.value("task", "") != j.value("task", "") || (s.contains(t) && s[t] != j[t])) {
+        std::cerr << "eval: warning: --config " << o.config_path << " differs from the config "
+                  << "saved with " << model_path << " in the task section (\"" << t
+                  << "\"); using --config\n";
+      }
+    }
+  } else if (saved.is_object()) {
+    j = TaskEnvConfig::FromJson(env_of(saved), model_path + " (saved config)").ToJson();
+    ctx = model_path + " (saved config)";
+  } else {
+    if (o.task.empty()) {
+      throw ConfigError("--task: required when neither --config nor the model carries a config");
+    }
+    j = TaskEnvConfig::Defaults(o.task).ToJson();
+    ctx = "--task " + o.task;
+  }
+  const std::string task = j["task"].get<std::string>();
+  if (!o.task.empty() && task != o.task) {
+    throw ConfigError(ctx + ": task is \"" + task + "\", --task says \"" + o.task + "\"");
+  }
+  Json& sec = j[task == "stand" ? "walk" : task];
+  if (task == "walk") {
+    if (!o.stage.empty()) sec["stage"] = o.stage;
+    if (o.start == "reference") sec["reference_state_init"] = true;
+    if (o.start == "fixed") sec["reference_state_init"] = false;
+    if (o.target_turn_prob >= 0) sec["target_turn_prob"] = o.target_turn_prob;
+  } else if (!o.stage.empty() || o.target_turn_prob > 0) {
+    throw ConfigError("--stage / --target-turn-prob: only for --task walk");
+  }
+  if (task == "sit") {
+    // Evaluation starts from the clip's first frame (Table 4), unless asked otherwise.
+    sec["reference_state_init"] = o.start == "reference";
+  }
   if (!o.variant.empty()) {
     // The preset replaces the reward fields, so drop them before re-reading.
-    Json& w = j["walk"];
-    for (const char* k :
-         {"similarity", "root_vel_weight", "root_vel_alpha", "target_weight", "target_k"}) {
-      w.erase(k);
+    for (const char* k : {"similarity", "root_vel_weight", "root_vel_alpha", "target_weight",
+                          "target_k", "rot_weight", "rot_alpha", "hold_phase", "approach_weight"}) {
+      sec.erase(k);
     }
-    w["reward_variant"] = o.variant;
+    sec["reward_variant"] = o.variant;
   }
   if (!o.action_mode.empty()) j["action_mode"] = o.action_mode;
-  if (o.start == "reference") j["walk"]["reference_state_init"] = true;
-  if (o.start == "fixed") j["walk"]["reference_state_init"] = false;
-  if (o.target_turn_prob >= 0) j["walk"]["target_turn_prob"] = o.target_turn_prob;
-  return TaskEnvConfig::FromJson(j, config_path.empty() ? "--task " + task : config_path);
+  if (!o.chair.empty()) j["chair"] = o.chair;
+  if (task == "stand") j.erase("walk");
+  return TaskEnvConfig::FromJson(j, ctx);
+}
+
+std::vector<std::string> EvalTaskNames() {
+  std::vector<std::string> names = TaskNames();
+  return names;
 }
 
 }  // namespace
@@ -61,7 +142,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   struct EvalOpts {
     ConfigOverrides cfg;
     std::string model, filmstrip;
-    WalkEvalOptions eval;
+    EvalOptions eval;
     int frames = 6;
     int panel_px = 220;
     bool fixed_window = false;
@@ -71,17 +152,22 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   o->cfg.target_turn_prob = 0.0;  // eval measures the paper's targets, not a training curriculum
   CLI::App* cmd =
       root.add_subcommand("eval", "Evaluate a trained subtask policy over seeded episodes");
-  cmd->add_option("--task", o->cfg.task, "task to evaluate")->check(CLI::IsMember({"walk"}));
+  cmd->add_option("--task", o->cfg.task,
+                  "task to evaluate (default: the task of the model's saved config)")
+      ->check(CLI::IsMember(EvalTaskNames()));
   cmd->add_option("--model", o->model,
-                  "policy file: serialized perch.proto.ModelWeights or LearnerState, or a PERCHCKP "
-                  "cluster checkpoint")
+                  "policy: a PERCHCKP cluster checkpoint (carries its config), a run dir (its "
+                  "newest checkpoint and config.json), or a ModelWeights / LearnerState file")
       ->required();
   cmd->add_option("--config", o->cfg.config_path,
                   "task env config JSON, or an experiment / run config.json (its env section); "
-                  "default: the task's defaults");
+                  "default: the config saved with the model, else the task's defaults");
+  cmd->add_option("--chair", o->cfg.chair,
+                  "chair override: a preset in data/chairs/ (authors, armchair, ...) or a chair "
+                  "JSON file");
   cmd->add_option("--start", o->cfg.start,
-                  "episode start override: fixed (the config's initial pose) or reference (a "
-                  "random phase of the reference motion, the stage-1 training distribution)")
+                  "episode start override: fixed (the config's initial pose / the clip's first "
+                  "frame) or reference (a random phase of the reference motion)")
       ->check(CLI::IsMember({"fixed", "reference"}));
   cmd->add_option("--stage", o->cfg.stage, "walk stage override")
       ->check(CLI::IsMember({"forward", "target"}));
@@ -98,7 +184,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   cmd->add_option("--seed", o->eval.seed, "episode seed (episode e uses (seed, e))");
   cmd->add_flag("--stochastic", o->eval.stochastic,
                 "sample actions instead of the Gaussian's mean");
-  cmd->add_option("--no-fall-seconds", o->eval.no_fall_s, "no-fall window [s]")
+  cmd->add_option("--no-fall-seconds", o->eval.no_fall_s, "walk: no-fall window [s]")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--filmstrip", o->filmstrip, "draw episode 0 as a PNG filmstrip here");
   cmd->add_option("--frames", o->frames, "filmstrip frames")->check(CLI::Range(1, 64));
@@ -108,13 +194,17 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                 "one world window for all panels (default: each panel follows the humanoid)");
   cmd->add_flag("--json", o->json, "print one JSON object on stdout");
   cmd->callback([o]() {
-    const TaskEnvConfig config = ResolveConfig(o->cfg);
-    const proto::ModelWeights weights = LoadModelFile(o->model);
-    WalkEvalRecording rec;
-    std::cerr << "eval: " << o->model << " (version " << weights.version() << "), "
-              << o->eval.episodes << " episodes, seed " << o->eval.seed << "\n";
-    Json result = EvaluateWalk(config, weights, o->eval, o->filmstrip.empty() ? nullptr : &rec);
-    result["model"] = o->model;
+    const TaskEnvConfig config = ResolveConfig(o->cfg, o->model);
+    const std::string model_file = ModelFile(o->model);
+    const proto::ModelWeights weights = LoadModelFile(model_file);
+    EvalRecording rec;
+    std::cerr << "eval: " << model_file << " (version " << weights.version() << "), task "
+              << config.env.task << ", " << o->eval.episodes << " episodes, seed " << o->eval.seed
+              << "\n";
+    const TaskDef& def = GetTask(config.env.task, "--task");
+    if (!def.evaluate) throw ConfigError("--task " + def.name + ": has no evaluation");
+    Json result = def.evaluate(config, weights, o->eval, o->filmstrip.empty() ? nullptr : &rec);
+    result["model"] = model_file;
     result["config"] = config.ToJson();
     if (!o->filmstrip.empty()) {
       std::unique_ptr<Chair> chair;
@@ -135,9 +225,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     if (o->json) {
       std::cout << result.dump() << "\n";
     } else {
-      std::cout << "episodes " << result["episodes"] << ", no_fall_rate " << result["no_fall_rate"]
-                << ", mean_imitation_reward " << result["mean_imitation_reward"]
-                << ", mean_forward_speed_mps " << result["mean_forward_speed_mps"] << "\n";
+      std::cout << "task " << result["task"] << ", episodes " << result["episodes"]
+                << ", success_rate " << result["success_rate"] << " (95% "
+                << result["success_ci95"].dump() << "), fall_rate " << result["fall_rate"]
+                << ", mean_imitation_reward " << result["mean_imitation_reward"] << "\n";
     }
   });
 
@@ -150,7 +241,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   auto t = std::make_shared<TrainOpts>();
   CLI::App* tr = root.add_subcommand(
       "train-local", "Bounded in-process PPO on a task env (no cluster): weights + learning curve");
-  tr->add_option("--task", t->cfg.task, "task")->check(CLI::IsMember({"walk", "stand"}));
+  t->cfg.task = "walk";
+  std::vector<std::string> train_tasks = TaskNames();
+  train_tasks.push_back("stand");
+  tr->add_option("--task", t->cfg.task, "task")->check(CLI::IsMember(train_tasks));
   tr->add_option("--config", t->cfg.config_path,
                  "task env config JSON (default: the task's defaults)");
   tr->add_option("--stage", t->cfg.stage, "walk stage override")
@@ -166,13 +260,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   tr->add_option("--out", t->train.out_dir, "output directory")->required();
   tr->add_flag("--json", t->json, "print one JSON summary on stdout");
   tr->callback([t]() {
-    TaskEnvConfig config;
-    if (t->cfg.task == "walk") {
-      config = ResolveConfig(t->cfg);
-    } else {
-      config = t->cfg.config_path.empty() ? TaskEnvConfig::Defaults(t->cfg.task)
-                                          : TaskEnvConfig::Load(t->cfg.config_path);
-    }
+    const TaskEnvConfig config = ResolveConfig(t->cfg, "");
     if (t->steps_per_update > 0) t->train.ppo.steps_per_update = t->steps_per_update;
     const Json summary = TrainLocal(config, t->train, [](const Json& row) {
       std::cerr << "train-local: " << row.dump() << "\n";

@@ -52,14 +52,7 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "pd_implicit", c.pd_implicit, ctx);
   std::string layout = "proprio_goal";
   GetOptional(j, "obs_layout", layout, ctx);
-  if (layout == "proprio_goal") {
-    c.obs_layout = ObsLayout::kProprioGoal;
-  } else if (layout == "proprio_chair") {
-    c.obs_layout = ObsLayout::kProprioChair;
-  } else {
-    throw ConfigError(ctx + ".obs_layout: expected \"proprio_goal\" or \"proprio_chair\", got \"" +
-                      layout + "\"");
-  }
+  c.obs_layout = ObsLayoutFromName(layout, ctx + ".obs_layout");
   if (j.contains("obs")) {
     const Json& o = j["obs"];
     const std::string oc = ctx + ".obs";
@@ -117,10 +110,8 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
   }
   GetOptional(j, "seat_contact_max_pelvis_z", c.seat_contact_max_pelvis_z, ctx);
   GetOptional(j, "task", c.task, ctx);
-  // "walk" is built by tasks/ (MakeTaskEnv); the env only needs to know the name.
-  if (c.task != "stand" && c.task != "walk") {
-    throw ConfigError(ctx + ".task: unknown task \"" + c.task + "\" (known: stand, walk)");
-  }
+  // Tasks other than "stand" are built and their names checked by tasks/ (tasks/registry.h).
+  if (c.task.empty()) throw ConfigError(ctx + ".task: must not be empty");
   if (j.contains("stand")) {
     const Json& s = j["stand"];
     const std::string sc = ctx + ".stand";
@@ -148,7 +139,7 @@ Json EnvConfig::ToJson() const {
       {"physics", physics.ToJson()},
       {"action_mode", action_mode == ActionMode::kTorque ? "torque" : "pd"},
       {"pd_implicit", pd_implicit},
-      {"obs_layout", obs_layout == ObsLayout::kProprioGoal ? "proprio_goal" : "proprio_chair"},
+      {"obs_layout", ObsLayoutName(obs_layout)},
       {"obs",
        {{"initial_z", obs.initial_z},
         {"velocity_scale", obs.velocity_scale},
@@ -197,5 +188,37 @@ std::string EnvConfig::ChairPath() const {
 }
 
 std::string EnvConfig::QposPath() const { return Resolve(init.qpos_file); }
+
+ObsLayout ObsLayoutFromName(const std::string& name, const std::string& ctx) {
+  if (name == "proprio") return ObsLayout::kProprio;
+  if (name == "proprio_goal") return ObsLayout::kProprioGoal;
+  if (name == "proprio_chair") return ObsLayout::kProprioChair;
+  throw ConfigError(ctx + ": expected \"proprio\", \"proprio_goal\" or \"proprio_chair\", got \"" +
+                    name + "\"");
+}
+
+std::string ObsLayoutName(ObsLayout layout) {
+  switch (layout) {
+    case ObsLayout::kProprio:
+      return "proprio";
+    case ObsLayout::kProprioGoal:
+      return "proprio_goal";
+    case ObsLayout::kProprioChair:
+      return "proprio_chair";
+  }
+  return "?";
+}
+
+int ObsLayoutDim(ObsLayout layout) {
+  switch (layout) {
+    case ObsLayout::kProprio:
+      return 50;
+    case ObsLayout::kProprioGoal:
+      return 52;
+    case ObsLayout::kProprioChair:
+      return 57;
+  }
+  return 0;
+}
 
 }  // namespace perch

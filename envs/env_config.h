@@ -16,7 +16,8 @@ enum class ActionMode {
 };
 
 enum class ObsLayout {
-  kProprioGoal,   // more(6) joints(42) feet(2) goal(2): 52, walk / turn policies
+  kProprio,       // more(6) joints(42) feet(2): 50, the paper's turn state (Sec. 4)
+  kProprioGoal,   // more(6) joints(42) feet(2) goal(2): 52, walk policies
   kProprioChair,  // more(6) joints(42) feet(2) chair(7): 57, sit / meta policies
 };
 
@@ -84,6 +85,8 @@ struct EnvConfig {
   InitConfig init;
   SafetyConfig safety;
   double seat_contact_max_pelvis_z = 0.54;  // contact = pelvis touches chair AND pelvis z < this
+  // The task by name: "stand" is built here; the others (walk, turn_left, turn_right, sit) by
+  // tasks/ (tasks/registry.h), which checks the name.
   std::string task = "stand";
   StandTaskConfig stand;
 
@@ -95,5 +98,10 @@ struct EnvConfig {
   std::string ChairPath() const;  // empty for "none"
   std::string QposPath() const;
 };
+
+// "proprio", "proprio_goal", "proprio_chair" and back; ConfigError naming ctx on another name.
+ObsLayout ObsLayoutFromName(const std::string& name, const std::string& ctx);
+std::string ObsLayoutName(ObsLayout layout);
+int ObsLayoutDim(ObsLayout layout);  // 50, 52, 57
 
 }  // namespace perch

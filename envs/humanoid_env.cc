@@ -67,11 +67,8 @@ class StandTask : public Task {
 
 std::unique_ptr<Task> MakeTask(const EnvConfig& config) {
   if (config.task == "stand") return std::make_unique<StandTask>(config.stand);
-  if (config.task == "walk") {
-    throw ConfigError(
-        "task: \"walk\" lives in tasks/; build the env with MakeTaskEnv (tasks/task_env.h)");
-  }
-  throw ConfigError("task: unknown task \"" + config.task + "\"");
+  throw ConfigError("task: \"" + config.task +
+                    "\" is not built by envs/; tasks/ builds it (MakeTaskEnv, tasks/task_env.h)");
 }
 
 // ---- poses -----------------------------------------------------------------------------------
@@ -149,15 +146,16 @@ HumanoidChairEnv::~HumanoidChairEnv() = default;
 
 void HumanoidChairEnv::BuildSpec() {
   spec_.name = std::string("humanoid_chair_") + task_->name();
-  const bool chair_obs = config_.obs_layout == ObsLayout::kProprioChair;
-  spec_.obs_dim = kProprioDim + (chair_obs ? 7 : 2);
+  const ObsLayout layout = config_.obs_layout;
+  spec_.obs_dim = ObsLayoutDim(layout);
   spec_.act_dim = model_.num_joints();
   spec_.obs_low.assign(spec_.obs_dim, static_cast<float>(-config_.obs.clip));
   spec_.obs_high.assign(spec_.obs_dim, static_cast<float>(config_.obs.clip));
   spec_.act_low.assign(spec_.act_dim, -1.0f);
   spec_.act_high.assign(spec_.act_dim, 1.0f);
   spec_.obs_slices = {{"more", 0, 6}, {"joints", 6, 42}, {"feet", 48, 2}};
-  spec_.obs_slices.push_back(chair_obs ? ObsSlice{"chair", 50, 7} : ObsSlice{"goal", 50, 2});
+  if (layout == ObsLayout::kProprioChair) spec_.obs_slices.push_back({"chair", 50, 7});
+  if (layout == ObsLayout::kProprioGoal) spec_.obs_slices.push_back({"goal", 50, 2});
   spec_.control_dt = config_.physics.physics_dt * config_.physics.substeps;
   spec_.max_episode_steps = task_->max_episode_steps();
 }
@@ -326,7 +324,7 @@ void HumanoidChairEnv::WriteObs(float* obs) {
     const double psi = std::atan2(walk_target_.y() - b.y(), walk_target_.x() - b.x()) - yaw;
     obs[k++] = Clip(std::sin(psi), clip);
     obs[k++] = Clip(std::cos(psi), clip);
-  } else {
+  } else if (config_.obs_layout == ObsLayout::kProprioChair) {
     // chair(7): pelvis -> seat target in the torso frame; conjugate torso quaternion relative to
     // the chair frame (= world for the authors' unrotated chair), x y z w with w >= 0.
     const Eigen::Vector3d p = s.root_quat.conjugate() * (world_->SeatTargetWorld() - PelvisPosition());

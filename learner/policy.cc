@@ -341,6 +341,45 @@ proto::ModelWeights WidenModelWeights(const proto::ModelWeights& narrow, const P
   return out;
 }
 
+proto::ModelWeights DropTrailingInputs(const proto::ModelWeights& w, int obs_dim,
+                                       const std::string& ctx) {
+  const PolicyConfig src_c = PolicyConfigFromShape(w.shape(), ctx);
+  if (obs_dim < 1 || obs_dim >= src_c.obs_dim) {
+    throw ConfigError(ctx + ": cannot map " + std::to_string(src_c.obs_dim) + " inputs onto " +
+                      std::to_string(obs_dim) + " (only dropping trailing inputs is supported)");
+  }
+  const ActorCritic src(src_c, 0);
+  if (w.params_size() != src.num_params()) {
+    throw ConfigError(ctx + ": params has " + std::to_string(w.params_size()) +
+                      " values, its shape needs " + std::to_string(src.num_params()));
+  }
+  PolicyConfig dst_c = src_c;
+  dst_c.obs_dim = obs_dim;
+  ActorCritic dst(dst_c, 0);
+  const float* sp = w.params().data();
+  float* dp = dst.params().data();
+  // Each MLP starts with W_0 [hidden x in], column-major: input i is a contiguous column.
+  auto copy_mlp = [&](const Mlp& s_mlp, const float* s, const Mlp& d_mlp, float* d) {
+    const int h = s_mlp.sizes()[1];
+    std::copy(s, s + h * obs_dim, d);
+    const int s_rest = s_mlp.num_params() - h * src_c.obs_dim;
+    std::copy(s + h * src_c.obs_dim, s + h * src_c.obs_dim + s_rest, d + h * obs_dim);
+    (void)d_mlp;
+  };
+  copy_mlp(src.policy_mlp(), sp, dst.policy_mlp(), dp);
+  copy_mlp(src.value_mlp(), sp + src.value_offset(), dst.value_mlp(), dp + dst.value_offset());
+  std::copy(sp + src.log_std_offset(), sp + src.log_std_offset() + src_c.act_dim,
+            dp + dst.log_std_offset());
+  proto::ModelWeights out = w;
+  dst.GetShape(out.mutable_shape());
+  out.mutable_params()->Assign(dst.params().data(), dst.params().data() + dst.num_params());
+  if (w.obs_stats().mean_size() == src_c.obs_dim && w.obs_stats().var_size() == src_c.obs_dim) {
+    out.mutable_obs_stats()->mutable_mean()->Truncate(obs_dim);
+    out.mutable_obs_stats()->mutable_var()->Truncate(obs_dim);
+  }
+  return out;
+}
+
 proto::ModelWeights ConvertStdMode(const proto::ModelWeights& w, const PolicyConfig& mine,
                                    const std::string& ctx) {
   proto::ModelWeights out = w;

@@ -131,6 +131,14 @@ PolicyConfig PolicyConfigFromShape(const proto::PolicyShape& shape, const std::s
 proto::ModelWeights WidenModelWeights(const proto::ModelWeights& narrow, const PolicyConfig& wide,
                                       uint64_t seed, const std::string& ctx);
 
+// `w` observing only its first `obs_dim` inputs (the trailing ones dropped from the first layer of
+// both MLPs and from the observation statistics): e.g. the walk policy (50-d proprioceptive + 2-d
+// goal) as the start of a turn policy (50-d), as the authors fine-tuned turns from walk (notes
+// 8.2). A dropped input then acts as if at its running mean (normalised 0). ConfigError when
+// obs_dim is not smaller than w's.
+proto::ModelWeights DropTrailingInputs(const proto::ModelWeights& w, int obs_dim,
+                                       const std::string& ctx);
+
 // `w` with the std mode of `mine` (a fine-tune that freezes or frees sigma): into a fixed-sigma
 // network the log-std becomes mine.init_log_std for every action dimension (what fixed means);
 // into a trained one the source's log-std is kept as the starting point. Other shape fields are

@@ -59,7 +59,7 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "restart_backoff_ms", c.restart_backoff_ms, ctx);
   GetOptional(j, "learner_queue_segments", c.learner_queue_segments, ctx);
   GetOptional(j, "init_from", c.init_from, ctx);
-  TaskFromName(c.task, ctx + ".task");
+  c.task = TaskName(TaskFromName(c.task, ctx + ".task"));  // one spelling from here on
   CheckMin(ctx, "segment_steps", c.segment_steps, 1);
   CheckMin(ctx, "envs_per_actor", c.envs_per_actor, 1);
   CheckMin(ctx, "max_policy_lag", c.max_policy_lag, 0);
@@ -83,13 +83,14 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
 
 proto::Task TaskFromName(const std::string& name, const std::string& ctx) {
   if (name == "walk") return proto::TASK_WALK;
-  if (name == "left_turn") return proto::TASK_LEFT_TURN;
-  if (name == "right_turn") return proto::TASK_RIGHT_TURN;
+  // The env's task names (turn_left, turn_right); the older left_turn / right_turn still read.
+  if (name == "turn_left" || name == "left_turn") return proto::TASK_LEFT_TURN;
+  if (name == "turn_right" || name == "right_turn") return proto::TASK_RIGHT_TURN;
   if (name == "sit") return proto::TASK_SIT;
   if (name == "meta") return proto::TASK_META;
   if (name == "stand") return proto::TASK_STAND;
   throw ConfigError(ctx + ": unknown task '" + name +
-                    "' (walk, left_turn, right_turn, sit, meta, stand)");
+                    "' (walk, turn_left, turn_right, sit, meta, stand)");
 }
 
 std::string TaskName(proto::Task task) {
@@ -97,9 +98,9 @@ std::string TaskName(proto::Task task) {
     case proto::TASK_WALK:
       return "walk";
     case proto::TASK_LEFT_TURN:
-      return "left_turn";
+      return "turn_left";
     case proto::TASK_RIGHT_TURN:
-      return "right_turn";
+      return "turn_right";
     case proto::TASK_SIT:
       return "sit";
     case proto::TASK_META:

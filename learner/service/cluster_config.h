@@ -12,7 +12,8 @@
 namespace perch {
 
 struct ClusterConfig {
-  // Which policy of the hierarchy is trained: walk, left_turn, right_turn, sit, meta, stand.
+  // Which policy of the hierarchy is trained: walk, turn_left, turn_right, sit, meta, stand. For
+  // the bullet backend it must name env.task (meta: the hierarchy env); --check-config says so.
   std::string task = "stand";
   int segment_steps = 256;           // T: control steps per rollout segment
   int envs_per_actor = 4;            // default for `perch actor --envs`

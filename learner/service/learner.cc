@@ -197,6 +197,13 @@ void LearnerService::InitFrom() {
   proto::ModelWeights w = c.trainer().model();
   w.set_version(0);
   const PolicyConfig& mine = ppo_->model().config();
+  // A policy that observes more (walk: proprioceptive + goal) starts one that observes its prefix
+  // (turn: proprioceptive), the authors' walk -> turn initialisation (notes 8.2).
+  if (w.shape().obs_dim() > mine.obs_dim) {
+    spdlog::info("learner: {}: its {} inputs mapped onto this run's first {} (the rest dropped)",
+                 ctx, w.shape().obs_dim(), mine.obs_dim);
+    w = DropTrailingInputs(w, mine.obs_dim, ctx);
+  }
   // A run that freezes or frees sigma takes the source's policy with its own std mode.
   if (w.shape().std_mode() != StdModeName(mine.std_mode)) {
     w = ConvertStdMode(w, mine, ctx);

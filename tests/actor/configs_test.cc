@@ -47,5 +47,44 @@ TEST(CommittedConfigs, EveryConfigLoadsAndItsInitFromExists) {
   EXPECT_GT(task_configs, 0);
 }
 
+std::string ExperimentError(const Json& j) {
+  try {
+    ExperimentConfigFromJson(j, "x.json");
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(ExperimentConfig, ClusterTaskMustNameTheEnvsTaskAndIsDerivedWhenAbsent) {
+  // The case: a left-turn cluster task over the walk env trains the wrong thing.
+  const std::string e = ExperimentError(
+      {{"env", {{"task", "walk"}, {"chair", "none"}}}, {"cluster", {{"task", "left_turn"}}}});
+  EXPECT_NE(e.find("x.json.cluster.task"), std::string::npos) << e;
+  EXPECT_NE(e.find("walk"), std::string::npos) << e;
+  EXPECT_EQ(ExperimentError({{"env", {{"task", "turn_left"}}}, {"cluster", {{"task", "left_turn"}}}}),
+            "");  // the older spelling of the same task
+  const ExperimentConfig c = ExperimentConfigFromJson({{"env", {{"task", "sit"}}}}, "x.json");
+  EXPECT_EQ(c.cluster.task, "sit");
+  // The hierarchy has no env yet: refused by field, not left to crash actors.
+  EXPECT_NE(ExperimentError({{"env", {{"task", "sit"}}}, {"cluster", {{"task", "meta"}}}})
+                .find("x.json.cluster.task"),
+            std::string::npos);
+  EXPECT_NE(ExperimentError({{"env", {{"task", "sit"}}}, {"cluster", {{"hierarchy_enabled", true}}}})
+                .find("x.json.cluster.hierarchy_enabled"),
+            std::string::npos);
+  // The mock backend (transport tests) keeps its meta task.
+  EXPECT_EQ(ExperimentError({{"env_backend", "mock"}, {"cluster", {{"task", "meta"}}}}), "");
+}
+
+TEST(ExperimentConfig, EachSubtaskConfigBuildsItsEnvWithThePapersObservation) {
+  for (const auto& [file, dim] : std::vector<std::pair<std::string, int>>{
+           {"configs/turn_left.json", 50}, {"configs/turn_right.json", 50}, {"configs/sit.json", 57}}) {
+    SCOPED_TRACE(file);
+    const ExperimentConfig c = LoadExperimentConfig(ResolveProjectPath(file));
+    EXPECT_EQ(MakeExperimentEnv(c)->spec().obs_dim, dim);
+  }
+}
+
 }  // namespace
 }  // namespace perch

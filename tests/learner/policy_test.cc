@@ -296,3 +296,55 @@ TEST(ConvertStdModeTest, FixedTakesTheRunsSigmaTrainedKeepsTheSources) {
 
 }  // namespace
 }  // namespace perch
+
+namespace perch {
+namespace {
+
+// Walk (52 inputs: proprioceptive + goal) -> turn (50): the mapped network acts and values as the
+// source does when the dropped inputs sit at their running mean.
+TEST(DropTrailingInputs, ActsAsTheSourceWithTheDroppedInputsAtTheirMean) {
+  PpoLearner learner(PolicyConfig::Subtask(52), PpoConfig::Subtask(), 11);
+  proto::ModelWeights w;
+  learner.ExportWeights(&w);
+  Rng rng(5);
+  // Non-trivial weights and statistics, so a wrong column or offset shows.
+  for (int i = 0; i < w.params_size(); ++i) w.set_params(i, static_cast<float>(rng.Normal() * 0.3));
+  proto::RunningStats* st = w.mutable_obs_stats();
+  st->set_count(100.0);
+  st->clear_mean();
+  st->clear_var();
+  for (int i = 0; i < 52; ++i) {
+    st->add_mean(rng.Uniform(-1.0, 1.0));
+    st->add_var(rng.Uniform(0.5, 2.0));
+  }
+  const proto::ModelWeights small = DropTrailingInputs(w, 50, "test");
+  EXPECT_EQ(small.shape().obs_dim(), 50);
+  EXPECT_EQ(small.obs_stats().mean_size(), 50);
+  PolicyRunner big_r(PolicyConfigFromShape(w.shape(), "w"), NormalizerConfig());
+  PolicyRunner small_r(PolicyConfigFromShape(small.shape(), "s"), NormalizerConfig());
+  big_r.LoadWeights(w);
+  small_r.LoadWeights(small);
+  big_r.set_update_obs_stats(false);
+  small_r.set_update_obs_stats(false);
+  for (int trial = 0; trial < 5; ++trial) {
+    std::vector<float> x(52), a(21), b(21);
+    for (int i = 0; i < 50; ++i) x[i] = static_cast<float>(rng.Normal());
+    x[50] = static_cast<float>(st->mean(50));
+    x[51] = static_cast<float>(st->mean(51));
+    const auto ob = big_r.Act(x.data(), rng, true, nullptr, a.data());
+    const auto os = small_r.Act(x.data(), rng, true, nullptr, b.data());
+    for (int i = 0; i < 21; ++i) EXPECT_NEAR(a[i], b[i], 1e-4) << i;
+    EXPECT_NEAR(ob.value, os.value, 1e-4);
+    // Away from the mean the dropped inputs matter for the source only.
+    x[50] += 3.0f;
+    big_r.Act(x.data(), rng, true, nullptr, a.data());
+    double diff = 0;
+    for (int i = 0; i < 21; ++i) diff += std::abs(a[i] - b[i]);
+    EXPECT_GT(diff, 1e-3);
+  }
+  EXPECT_THROW(DropTrailingInputs(w, 52, "t"), ConfigError);
+  EXPECT_THROW(DropTrailingInputs(w, 60, "t"), ConfigError);
+}
+
+}  // namespace
+}  // namespace perch

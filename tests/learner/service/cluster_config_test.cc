@@ -37,9 +37,12 @@ TEST(ClusterConfigTest, ErrorsNameFileAndField) {
 }
 
 TEST(ClusterConfigTest, TaskNamesRoundTrip) {
-  for (const char* n : {"walk", "left_turn", "right_turn", "sit", "meta", "stand"}) {
+  for (const char* n : {"walk", "turn_left", "turn_right", "sit", "meta", "stand"}) {
     EXPECT_EQ(TaskName(TaskFromName(n, "t")), n);
   }
+  // The older spellings still read, and become the env's task names.
+  EXPECT_EQ(TaskName(TaskFromName("left_turn", "t")), "turn_left");
+  EXPECT_EQ(TaskName(TaskFromName("right_turn", "t")), "turn_right");
 }
 
 TEST(ClusterConfigTest, Endpoints) {

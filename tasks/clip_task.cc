@@ -1,0 +1,127 @@
+#include "tasks/clip_task.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace perch {
+
+EnergyCostConfig EnergyCostConfig::FromJson(const Json& j, const std::string& ctx) {
+  CheckKnownKeys(j, {"speed_weight", "action_weight"}, ctx);
+  EnergyCostConfig c;
+  GetOptional(j, "speed_weight", c.speed_weight, ctx);
+  GetOptional(j, "action_weight", c.action_weight, ctx);
+  if (!(c.speed_weight >= 0) || !(c.action_weight >= 0)) {
+    throw ConfigError(ctx + ": weights must be >= 0");
+  }
+  return c;
+}
+
+Json EnergyCostConfig::ToJson() const {
+  return Json{{"speed_weight", speed_weight}, {"action_weight", action_weight}};
+}
+
+double EnergyCost(const EnergyCostConfig& c, const HumanoidChairEnv& env, const float* action) {
+  const HumanoidModel& model = env.model();
+  const HumanoidState& s = env.humanoid_state();
+  const int n = model.num_joints();
+  const double speed_scale = env.config().obs.joint_speed_scale;
+  double power = 0.0, a2 = 0.0;
+  for (int i = 0; i < n; ++i) {
+    const double a = std::isfinite(action[i]) ? action[i] : 0.0;
+    const int j = model.action_to_joint()[i];
+    power += std::abs(a * speed_scale * s.qd[j]);
+    a2 += a * a;
+  }
+  return -c.speed_weight * power / n - c.action_weight * a2 / n;
+}
+
+MotionPose ClipPlacement::Apply(const MotionPose& p) const {
+  const Eigen::AngleAxisd rz(yaw, Eigen::Vector3d::UnitZ());
+  MotionPose out = p;
+  out.root_pos = rz * p.root_pos + offset;
+  out.root_rot = Eigen::Quaterniond(rz) * p.root_rot;
+  out.root_vel = rz * p.root_vel;
+  out.root_angvel = rz * p.root_angvel;
+  return out;
+}
+
+ClipTask::ClipTask(const std::string& motion_path, double control_dt)
+    : motion_(ReferenceMotion::Load(motion_path)), dt_(control_dt) {
+  if (motion_.num_frames() < 2 || motion_.frame(0).q.size() != HumanoidModel::kNumJoints) {
+    throw ConfigError(motion_path + ": a reference clip needs >= 2 frames of " +
+                      std::to_string(HumanoidModel::kNumJoints) + " joint angles");
+  }
+  if (motion_.loop()) {
+    throw ConfigError(motion_path + ": a looping clip; turn and sit follow a clip once");
+  }
+}
+
+MotionPose ClipTask::ReferenceAt(int step) const {
+  const double t = m_.t0 + step * dt_;
+  MotionPose p = motion_.At(t);   // clamps to the last frame
+  if (t >= motion_.duration()) {  // the held last frame stands still
+    p.qdot.setZero();
+    p.root_vel.setZero();
+    p.root_angvel.setZero();
+  }
+  return m_.placement.Apply(p);
+}
+
+int ClipTask::ClipEndStep() const {
+  return std::max(0, static_cast<int>(std::ceil((motion_.duration() - m_.t0) / dt_ - 1e-9)));
+}
+
+HumanoidState ClipTask::StartState(const ClipPlacement& placement, double t0,
+                                   bool zero_joint_speeds) {
+  const MotionPose p = placement.Apply(motion_.At(t0));
+  HumanoidState s;
+  s.root_pos = p.root_pos;
+  s.root_quat = p.root_rot;
+  s.root_lin_vel = p.root_vel;
+  s.root_ang_vel = p.root_angvel;
+  for (int j = 0; j < HumanoidModel::kNumJoints; ++j) {
+    s.q[j] = p.q[j];
+    s.qd[j] = zero_joint_speeds ? 0.0 : p.qdot[j];
+  }
+  return s;
+}
+
+ClipTask::Similarity ClipTask::ComputeSimilarity(const SimilarityRewardConfig& c,
+                                                 const HumanoidChairEnv& env, int k) const {
+  constexpr int n = HumanoidModel::kNumJoints;
+  const HumanoidState& s = env.humanoid_state();
+  const MotionPose ref = ReferenceAt(k);
+  const bool fd = c.finite_difference_velocities;
+  MotionPose ref_prev;
+  if (fd) ref_prev = ReferenceAt(k - 1);
+  double qdot[n], qdot_ref[n];
+  for (int j = 0; j < n; ++j) {
+    qdot[j] = fd ? (s.q[j] - m_.prev_q[j]) / dt_ : s.qd[j];
+    qdot_ref[j] = fd ? (ref.q[j] - ref_prev.q[j]) / dt_ : ref.qdot[j];
+  }
+  Similarity r;
+  r.pose = PoseReward(s.q.data(), ref.q.data(), n, c.alpha_pose);
+  r.joint_vel = JointVelocityReward(qdot, qdot_ref, n, c.alpha_vel);
+  r.total = c.w_pose * r.pose + c.w_vel * r.joint_vel;
+  return r;
+}
+
+void ClipTask::RootVelocities(bool fd, const HumanoidChairEnv& env, int k, Eigen::Vector3d* v,
+                              Eigen::Vector3d* v_ref) const {
+  const HumanoidState& s = env.humanoid_state();
+  const MotionPose ref = ReferenceAt(k);
+  if (fd) {
+    *v = (s.root_pos - m_.prev_root) / dt_;
+    *v_ref = (ref.root_pos - ReferenceAt(k - 1).root_pos) / dt_;
+  } else {
+    *v = s.root_lin_vel;
+    *v_ref = ref.root_vel;
+  }
+}
+
+void ClipTask::RememberPose(const HumanoidChairEnv& env) {
+  m_.prev_q = env.humanoid_state().q;
+  m_.prev_root = env.humanoid_state().root_pos;
+}
+
+}  // namespace perch

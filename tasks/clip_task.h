@@ -1,0 +1,81 @@
+// The imitation-task base of the non-looping subtasks (turns, sit; paper Sec. 4, notes 3-4): a
+// clip placed per episode by a horizontal transform (yaw about z, then a translation), followed
+// one frame per control step and held at its last frame once it ends, the similarity reward
+// (Eq. 2-3) against it, and the per-episode memory (placement, start time, previous pose for
+// finite differences) as one struct that can be saved and restored with the env state.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <array>
+#include <string>
+
+#include "common/json_util.h"
+#include "envs/humanoid_env.h"
+#include "motion/reference_motion.h"
+#include "tasks/imitation.h"
+
+namespace perch {
+
+// The authors' energy term (notes 3.1): c = -w_speed mean_i |a_i qdot_n,i| - w_action mean_i a_i^2
+// with a the unclipped action and qdot_n the normalised joint speed (ours pairs each action with
+// its own joint; the authors' ankle pairs are crossed, notes 9.1). c <= 0.
+struct EnergyCostConfig {
+  double speed_weight = 7.0;    // 3.5 x Roboschool's 2.0
+  double action_weight = 0.35;  // 3.5 x Roboschool's 0.1
+  static EnergyCostConfig FromJson(const Json& j, const std::string& ctx);
+  Json ToJson() const;
+};
+double EnergyCost(const EnergyCostConfig& c, const HumanoidChairEnv& env, const float* action);
+
+// The reference placed in the world for one episode: p_world = R_z(yaw) p_clip + offset.
+struct ClipPlacement {
+  double yaw = 0.0;                                  // [rad]
+  Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // [m]
+  MotionPose Apply(const MotionPose& p) const;
+};
+
+class ClipTask : public Task {
+ public:
+  // Per-episode memory; with the env's EnvState it continues an episode from any point.
+  struct Memory {
+    ClipPlacement placement;
+    double t0 = 0.0;  // reference time at step 0 [s]
+    std::array<double, HumanoidModel::kNumJoints> prev_q{};
+    Eigen::Vector3d prev_root = Eigen::Vector3d::Zero();
+    double prev_distance = 0.0;  // the goal term's distance at the previous step [m]
+  };
+
+  ClipTask(const std::string& motion_path, double control_dt);
+  const ReferenceMotion& motion() const { return motion_; }
+  double control_dt() const { return dt_; }
+  // Reference at episode step k in the world (held at the last frame after the clip ends).
+  MotionPose ReferenceAt(int step) const;
+  // The first step at which the reference has reached its last frame.
+  int ClipEndStep() const;
+  bool ClipEnded(int step) const { return step >= ClipEndStep(); }
+  const Memory& GetMemory() const { return m_; }
+  void SetMemory(const Memory& m) { m_ = m; }
+  double start_time() const { return m_.t0; }
+
+ protected:
+  // The env state of the reference at time t0 under `placement` (joint speeds zeroed if asked).
+  HumanoidState StartState(const ClipPlacement& placement, double t0, bool zero_joint_speeds);
+  // Similarity terms at step k against ReferenceAt(k) (velocities by finite differences when
+  // c.finite_difference_velocities, notes 3.1). Uses the memory's previous pose.
+  struct Similarity {
+    double pose = 0.0, joint_vel = 0.0, total = 0.0;
+  };
+  Similarity ComputeSimilarity(const SimilarityRewardConfig& c, const HumanoidChairEnv& env,
+                               int step) const;
+  // Root velocity (world) by finite difference or from the simulator, and the reference's.
+  void RootVelocities(bool finite_difference, const HumanoidChairEnv& env, int step,
+                      Eigen::Vector3d* v, Eigen::Vector3d* v_ref) const;
+  void RememberPose(const HumanoidChairEnv& env);  // end of every step and at reset
+
+  ReferenceMotion motion_;
+  double dt_;
+  Memory m_;
+};
+
+}  // namespace perch

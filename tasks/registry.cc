@@ -1,0 +1,141 @@
+#include "tasks/registry.h"
+
+#include "envs/chair.h"
+#include "tasks/sit.h"
+#include "tasks/task_env.h"
+#include "tasks/task_eval.h"
+#include "tasks/turn.h"
+#include "tasks/walk_eval.h"
+
+namespace perch {
+namespace {
+
+TaskDef WalkDef() {
+  TaskDef d;
+  d.name = "walk";
+  d.description = "walk: imitation of the walk cycle, forward (stage 1) or to targets (stage 2)";
+  d.obs_layout = ObsLayout::kProprioGoal;
+  d.read = [](const Json* j, const std::string& ctx, TaskEnvConfig* c) {
+    if (j != nullptr) c->walk = WalkTaskConfig::FromJson(*j, ctx);
+  };
+  d.write = [](const TaskEnvConfig& c) { return c.walk.ToJson(); };
+  d.make = [](const TaskEnvConfig& c) -> std::unique_ptr<Task> {
+    return std::make_unique<WalkTask>(c.walk, c.control_dt());
+  };
+  d.evaluate = [](const TaskEnvConfig& c, const proto::ModelWeights& w, const EvalOptions& o,
+                  EvalRecording* rec) {
+    WalkEvalOptions wo;
+    wo.episodes = o.episodes;
+    wo.seed = o.seed;
+    wo.stochastic = o.stochastic;
+    wo.no_fall_s = o.no_fall_s;
+    wo.foot_sliding = o.foot_sliding;
+    WalkEvalRecording wr;
+    Json j = EvaluateWalk(c, w, wo, rec != nullptr ? &wr : nullptr);
+    if (rec != nullptr) {
+      rec->frames = std::move(wr.frames);
+      rec->targets = std::move(wr.targets);
+    }
+    // The common keys: walk's success is staying up for the no-fall window.
+    const int ok = static_cast<int>(std::lround(j["no_fall_rate"].get<double>() * o.episodes));
+    const auto ci = WilsonInterval95(ok, o.episodes);
+    j["success_rate"] = j["no_fall_rate"];
+    j["success_ci95"] = {ci[0], ci[1]};
+    return j;
+  };
+  return d;
+}
+
+TaskDef TurnDef(const std::string& name) {
+  TaskDef d;
+  d.name = name;
+  d.description = name + ": in-place turn by imitation of the turn clip, random yaw per episode";
+  d.obs_layout = ObsLayout::kProprio;
+  d.read = [name](const Json* j, const std::string& ctx, TaskEnvConfig* c) {
+    c->section = std::make_shared<TaskSectionOf<TurnTaskConfig>>(
+        TurnTaskConfig::FromJson(j != nullptr ? *j : Json::object(), ctx, name));
+  };
+  d.write = [](const TaskEnvConfig& c) { return c.Section<TurnTaskConfig>().ToJson(); };
+  d.make = [name](const TaskEnvConfig& c) -> std::unique_ptr<Task> {
+    return std::make_unique<TurnTask>(name, c.Section<TurnTaskConfig>(), c.control_dt());
+  };
+  d.evaluate = [](const TaskEnvConfig& c, const proto::ModelWeights& w, const EvalOptions& o,
+                  EvalRecording* rec) {
+    auto m = MakeTurnMetrics();
+    Json j = EvaluateEpisodes(c, w, o, m.get(), rec);
+    j["reward_variant"] = c.Section<TurnTaskConfig>().reward_variant;
+    return j;
+  };
+  return d;
+}
+
+TaskDef SitDef() {
+  TaskDef d;
+  d.name = "sit";
+  d.description = "sit: from standing with the back to the chair to seated, imitating the sit clip";
+  d.obs_layout = ObsLayout::kProprioChair;
+  d.needs_chair = true;
+  d.read = [](const Json* j, const std::string& ctx, TaskEnvConfig* c) {
+    c->section = std::make_shared<TaskSectionOf<SitTaskConfig>>(
+        SitTaskConfig::FromJson(j != nullptr ? *j : Json::object(), ctx));
+  };
+  d.write = [](const TaskEnvConfig& c) { return c.Section<SitTaskConfig>().ToJson(); };
+  d.check = [](const TaskEnvConfig& c, const std::string& ctx) {
+    const Chair chair = Chair::Load(c.env.ChairPath());
+    const double limit = c.Section<SitTaskConfig>().max_seat_height_m;
+    if (chair.seat_height() > limit) {
+      throw ConfigError(ctx + ".chair: \"" + c.env.chair + "\" has its seat at " +
+                        std::to_string(chair.seat_height()) + " m, above the humanoid's reach (" +
+                        ctx + ".sit.max_seat_height_m " + std::to_string(limit) + " m)");
+    }
+  };
+  d.make = [](const TaskEnvConfig& c) -> std::unique_ptr<Task> {
+    return std::make_unique<SitTask>(c.Section<SitTaskConfig>(), c.control_dt());
+  };
+  d.evaluate = [](const TaskEnvConfig& c, const proto::ModelWeights& w, const EvalOptions& o,
+                  EvalRecording* rec) {
+    auto m = MakeSitMetrics();
+    Json j = EvaluateEpisodes(c, w, o, m.get(), rec);
+    j["reward_variant"] = c.Section<SitTaskConfig>().reward_variant;
+    j["reference_state_init"] = c.Section<SitTaskConfig>().reference_state_init;
+    return j;
+  };
+  return d;
+}
+
+const std::vector<TaskDef>& Registry() {
+  static const std::vector<TaskDef> tasks = {WalkDef(), TurnDef("turn_left"), TurnDef("turn_right"),
+                                             SitDef()};
+  return tasks;
+}
+
+}  // namespace
+
+const TaskDef* FindTask(const std::string& name) {
+  for (const TaskDef& d : Registry()) {
+    if (d.name == name) return &d;
+  }
+  return nullptr;
+}
+
+std::vector<std::string> TaskNames() {
+  std::vector<std::string> names;
+  for (const TaskDef& d : Registry()) names.push_back(d.name);
+  return names;
+}
+
+std::string TaskNamesJoined() {
+  std::string s = "stand";
+  for (const std::string& n : TaskNames()) s += ", " + n;
+  return s;
+}
+
+const TaskDef& GetTask(const std::string& name, const std::string& ctx) {
+  const TaskDef* d = FindTask(name);
+  if (d == nullptr) {
+    throw ConfigError(ctx + ": unknown task \"" + name + "\" (known: " + TaskNamesJoined() + ")");
+  }
+  return *d;
+}
+
+}  // namespace perch

@@ -1,0 +1,62 @@
+// The task registry: every task the humanoid-chair env can run, by name, in one table (as
+// EnvPool binds task ids to specs). Per task: its observation layout, whether it needs a chair,
+// how its config section is read and written, its factory and its evaluation. The env factory,
+// `perch train`, `perch eval` and `--check-config` find tasks here; adding a task is its own
+// file plus one entry in registry.cc.
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/json_util.h"
+#include "common/proto/model.pb.h"
+#include "envs/env_config.h"
+#include "envs/humanoid_env.h"
+
+namespace perch {
+
+struct TaskEnvConfig;
+struct EvalOptions;
+struct EvalRecording;
+
+// A task's typed config section, type-erased so TaskEnvConfig can hold any task's.
+struct TaskSection {
+  virtual ~TaskSection() = default;
+  virtual Json ToJson() const = 0;
+};
+template <class C>
+struct TaskSectionOf : TaskSection {
+  explicit TaskSectionOf(C c) : config(std::move(c)) {}
+  C config;
+  Json ToJson() const override { return config.ToJson(); }
+};
+
+struct TaskDef {
+  std::string name;  // env.task, the config section's key and the wire task name
+  std::string description;
+  ObsLayout obs_layout = ObsLayout::kProprioGoal;
+  bool needs_chair = false;  // false: the chair defaults to "none"
+  // Reads the task's section (j null: the defaults) into config (ConfigError naming ctx).
+  std::function<void(const Json* j, const std::string& ctx, TaskEnvConfig* config)> read;
+  // The section as written into resolved configs (null: no section).
+  std::function<Json(const TaskEnvConfig& config)> write;
+  // Checks across sections, e.g. a chair the task cannot use (ConfigError naming the field).
+  std::function<void(const TaskEnvConfig& config, const std::string& ctx)> check;
+  std::function<std::unique_ptr<Task>(const TaskEnvConfig& config)> make;
+  // `perch eval`: one JSON object with at least episodes, success_rate (+ success_ci95),
+  // fall_rate and mean_imitation_reward.
+  std::function<Json(const TaskEnvConfig&, const proto::ModelWeights&, const EvalOptions&,
+                     EvalRecording*)>
+      evaluate;
+};
+
+// nullptr when unknown.
+const TaskDef* FindTask(const std::string& name);
+// ConfigError "CTX: unknown task "x" (known: ...)".
+const TaskDef& GetTask(const std::string& name, const std::string& ctx);
+std::vector<std::string> TaskNames();
+std::string TaskNamesJoined();  // "stand, walk, turn_left, ..."
+
+}  // namespace perch

@@ -1,0 +1,165 @@
+#include "tasks/sit.h"
+
+#include <cmath>
+
+#include "common/paths.h"
+
+namespace perch {
+
+void SitTaskConfig::ApplyVariant(const std::string& variant, const std::string& ctx) {
+  similarity.w_pose = 0.5;
+  similarity.w_vel = 0.05;
+  similarity.alpha_pose = 1.0;
+  approach_weight = 0.5;
+  if (variant == "paper") {
+    similarity.alpha_vel = 10.0;
+    similarity.finite_difference_velocities = false;
+    hold_phase = false;
+  } else if (variant == "authors") {  // notes 3.2-3.3
+    similarity.alpha_vel = 0.01;
+    similarity.finite_difference_velocities = true;
+    hold_phase = true;
+  } else {
+    throw ConfigError(ctx + ".reward_variant: expected \"paper\" or \"authors\", got \"" + variant +
+                      "\"");
+  }
+  reward_variant = variant;
+}
+
+SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
+  CheckKnownKeys(j,
+                 {"reward_variant", "motion_file", "similarity", "approach_weight", "hold_phase",
+                  "hold_pose_weight", "hold_energy_weight", "energy", "pelvis_end_offset",
+                  "reference_state_init", "rsi_max_fraction", "rsi_zero_joint_speeds", "min_root_z",
+                  "max_episode_steps", "success_contact_s", "eval_episode_s", "max_seat_height_m"},
+                 ctx);
+  SitTaskConfig c;
+  std::string variant = c.reward_variant;
+  GetOptional(j, "reward_variant", variant, ctx);
+  c.ApplyVariant(variant, ctx);
+  GetOptional(j, "motion_file", c.motion_file, ctx);
+  if (j.contains("similarity")) {
+    c.similarity =
+        SimilarityRewardConfig::FromJson(j["similarity"], ctx + ".similarity", c.similarity);
+  }
+  GetOptional(j, "approach_weight", c.approach_weight, ctx);
+  GetOptional(j, "hold_phase", c.hold_phase, ctx);
+  GetOptional(j, "hold_pose_weight", c.hold_pose_weight, ctx);
+  GetOptional(j, "hold_energy_weight", c.hold_energy_weight, ctx);
+  if (j.contains("energy")) c.energy = EnergyCostConfig::FromJson(j["energy"], ctx + ".energy");
+  GetOptional(j, "pelvis_end_offset", c.pelvis_end_offset, ctx);
+  GetOptional(j, "reference_state_init", c.reference_state_init, ctx);
+  GetOptional(j, "rsi_max_fraction", c.rsi_max_fraction, ctx);
+  GetOptional(j, "rsi_zero_joint_speeds", c.rsi_zero_joint_speeds, ctx);
+  GetOptional(j, "min_root_z", c.min_root_z, ctx);
+  GetOptional(j, "max_episode_steps", c.max_episode_steps, ctx);
+  GetOptional(j, "success_contact_s", c.success_contact_s, ctx);
+  GetOptional(j, "eval_episode_s", c.eval_episode_s, ctx);
+  GetOptional(j, "max_seat_height_m", c.max_seat_height_m, ctx);
+  if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
+  if (!(c.rsi_max_fraction >= 0 && c.rsi_max_fraction <= 1)) {
+    throw ConfigError(ctx + ".rsi_max_fraction: must be in [0, 1]");
+  }
+  if (!(c.success_contact_s > 0)) throw ConfigError(ctx + ".success_contact_s: must be > 0");
+  if (!(c.eval_episode_s > 0)) throw ConfigError(ctx + ".eval_episode_s: must be > 0");
+  if (!(c.max_seat_height_m > 0)) throw ConfigError(ctx + ".max_seat_height_m: must be > 0");
+  for (double w : {c.approach_weight, c.hold_pose_weight, c.hold_energy_weight}) {
+    if (!(w >= 0)) throw ConfigError(ctx + ": reward weights must be >= 0");
+  }
+  for (double v : c.pelvis_end_offset) {
+    if (!std::isfinite(v) || std::abs(v) > 1.0) {
+      throw ConfigError(ctx + ".pelvis_end_offset: each value must be within +-1 m");
+    }
+  }
+  return c;
+}
+
+Json SitTaskConfig::ToJson() const {
+  return Json{{"reward_variant", reward_variant},
+              {"motion_file", motion_file},
+              {"similarity", similarity.ToJson()},
+              {"approach_weight", approach_weight},
+              {"hold_phase", hold_phase},
+              {"hold_pose_weight", hold_pose_weight},
+              {"hold_energy_weight", hold_energy_weight},
+              {"energy", energy.ToJson()},
+              {"pelvis_end_offset", pelvis_end_offset},
+              {"reference_state_init", reference_state_init},
+              {"rsi_max_fraction", rsi_max_fraction},
+              {"rsi_zero_joint_speeds", rsi_zero_joint_speeds},
+              {"min_root_z", min_root_z},
+              {"max_episode_steps", max_episode_steps},
+              {"success_contact_s", success_contact_s},
+              {"eval_episode_s", eval_episode_s},
+              {"max_seat_height_m", max_seat_height_m}};
+}
+
+SitTask::SitTask(const SitTaskConfig& config, double control_dt)
+    : ClipTask(ResolveProjectPath(config.motion_file), control_dt), c_(config) {}
+
+double SitTask::ChairYaw(const HumanoidChairEnv& env) { return env.config().chair_placement.yaw; }
+
+ClipPlacement SitTask::PlacementFor(const HumanoidChairEnv& env) const {
+  ClipPlacement p;
+  p.yaw = ChairYaw(env);
+  const Eigen::AngleAxisd rz(p.yaw, Eigen::Vector3d::UnitZ());
+  const Eigen::Vector3d seat = env.SeatTargetWorld();
+  const Eigen::Vector3d want =
+      seat + rz * Eigen::Vector3d(c_.pelvis_end_offset[0], c_.pelvis_end_offset[1], 0.0);
+  const Eigen::Vector3d have = rz * pelvis_end_clip_;
+  p.offset = Eigen::Vector3d(want.x() - have.x(), want.y() - have.y(), 0.0);
+  return p;
+}
+
+bool SitTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) {
+  if (!pelvis_end_known_) {
+    // The chair check needs the env's chair, so it happens at the first reset.
+    if (env.config().chair == "none") {
+      throw ConfigError("env.chair: the sit task needs a chair (got \"none\")");
+    }
+    const MotionPose& last = motion_.frame(motion_.num_frames() - 1);
+    const FkResult fk = ForwardKinematics(env.model(), last.root_pos, last.root_rot, last.q.data());
+    pelvis_end_clip_ = fk.body_world[env.model().pelvis_body()].translation();
+    pelvis_end_known_ = true;
+  }
+  m_.placement = PlacementFor(env);
+  const bool rsi = c_.reference_state_init;
+  m_.t0 = rsi ? rng.Uniform(0.0, c_.rsi_max_fraction * motion_.duration()) : 0.0;
+  *s = StartState(m_.placement, m_.t0, rsi && c_.rsi_zero_joint_speeds);
+  return true;
+}
+
+void SitTask::OnReset(HumanoidChairEnv& env, Rng& rng) {
+  RememberPose(env);
+  m_.prev_distance = env.PelvisSeatDistance();
+  terms_ = SitTerms();
+  terms_.seat_distance_m = m_.prev_distance;
+  env.SetWalkTarget(env.SeatTargetWorld().head<2>());
+}
+
+TaskStep SitTask::OnStep(const HumanoidChairEnv& env, const float* action) {
+  const int k = env.episode_step();
+  SitTerms t;
+  const Similarity sim = ComputeSimilarity(c_.similarity, env, k);
+  t.pose = sim.pose;
+  t.joint_vel = sim.joint_vel;
+  t.seat_distance_m = env.PelvisSeatDistance();
+  if (c_.hold_phase && ClipEnded(k)) {
+    t.similarity = c_.hold_pose_weight * t.pose;
+    t.energy = c_.hold_energy_weight * EnergyCost(c_.energy, env, action);
+  } else {
+    t.similarity = sim.total;
+    t.approach = ApproachReward(m_.prev_distance, t.seat_distance_m, dt_, c_.approach_weight);
+  }
+  t.total = t.similarity + t.approach + t.energy;
+  terms_ = t;
+  m_.prev_distance = t.seat_distance_m;
+  RememberPose(env);
+  TaskStep r;
+  r.reward = static_cast<float>(t.total);
+  r.terminated = env.humanoid_state().root_pos.z() < c_.min_root_z;
+  return r;
+}
+
+}  // namespace perch

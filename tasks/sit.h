@@ -1,0 +1,80 @@
+// The sit subtask (paper Sec. 4 "Sit", Sec. 6; notes 3.2, 4.1-4.3, 5): standing in front of the
+// chair with the back to it, lower the body and be seated. The sit clip is placed so that its
+// seated pelvis ends over the chair's seat target, facing the chair's front. Observation: the
+// 57-d state (50-d proprioceptive + the 7-d chair feature). Reward: Eq. 2-3 + Eq. 7 (approach
+// speed of the pelvis to the seat target); the authors' variant holds the last frame with an
+// energy term once the clip ends. Reference state initialisation for training (start time drawn
+// along the clip, joint speeds zeroed). Early termination: root below 0.54 m.
+#pragma once
+
+#include <string>
+
+#include "common/json_util.h"
+#include "tasks/clip_task.h"
+
+namespace perch {
+
+struct SitTaskConfig {
+  //   "paper":   Eq. 2-3 (alpha_vel 10, simulator velocities) + Eq. 7; no hold phase;
+  //   "authors": alpha_vel 0.01 on finite differences + Eq. 7; after the clip 0.5 r_pose + 0.1 c.
+  std::string reward_variant = "paper";
+  std::string motion_file = "data/motions/sit.json";
+  SimilarityRewardConfig similarity;
+  double approach_weight = 0.5;  // Eq. 7 weight [per m/s]
+  bool hold_phase = false;
+  double hold_pose_weight = 0.5;
+  double hold_energy_weight = 0.1;
+  EnergyCostConfig energy;
+  // Where the clip's last-frame pelvis lands, relative to the seat target, in the chair frame
+  // (x forward from the seat, y to the chair's left) [m].
+  std::array<double, 2> pelvis_end_offset{0.0, 0.0};
+  // Reference state initialisation (paper Sec. 6): start time ~ U(0, rsi_max_fraction x clip),
+  // joint speeds zeroed (notes 4.3: s ~ U(0..82) of a 104-frame segment). Off: frame 0.
+  bool reference_state_init = true;
+  double rsi_max_fraction = 0.8;
+  bool rsi_zero_joint_speeds = true;
+  double min_root_z = 0.54;     // early termination [m]
+  int max_episode_steps = 300;  // authors: 300 control steps (4.95 s)
+  // Success (paper Sec. 7, notes 4.8): pelvis continuously on the seat (pelvis touches the chair
+  // and pelvis z < env.seat_contact_max_pelvis_z) for this long.
+  double success_contact_s = 3.0;
+  // Evaluation episodes last at least this long, so a sit after the clip can show 3 s seated.
+  double eval_episode_s = 7.0;
+  // A chair whose seat is higher than this cannot be sat on from standing (the humanoid's hip
+  // joints stand about 0.92 m high) [m].
+  double max_seat_height_m = 0.8;
+
+  void ApplyVariant(const std::string& variant, const std::string& ctx);
+  static SitTaskConfig FromJson(const Json& j, const std::string& ctx);
+  Json ToJson() const;
+};
+
+struct SitTerms {
+  double pose = 0, joint_vel = 0, similarity = 0, approach = 0, energy = 0, total = 0;
+  double seat_distance_m = 0;  // 3-D pelvis - seat target
+};
+
+class SitTask : public ClipTask {
+ public:
+  SitTask(const SitTaskConfig& config, double control_dt);
+  const char* name() const override { return "sit"; }
+  int max_episode_steps() const override { return c_.max_episode_steps; }
+  bool InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) override;
+  void OnReset(HumanoidChairEnv& env, Rng& rng) override;
+  TaskStep OnStep(const HumanoidChairEnv& env, const float* action) override;
+
+  const SitTaskConfig& config() const { return c_; }
+  const SitTerms& last_terms() const { return terms_; }
+  // The placement of the clip for a chair: facing the chair's front, pelvis end over the seat.
+  ClipPlacement PlacementFor(const HumanoidChairEnv& env) const;
+  // Facing direction of the chair (its +x axis) in the world [rad].
+  static double ChairYaw(const HumanoidChairEnv& env);
+
+ private:
+  SitTaskConfig c_;
+  SitTerms terms_;
+  Eigen::Vector3d pelvis_end_clip_ = Eigen::Vector3d::Zero();  // clip frame [m]
+  bool pelvis_end_known_ = false;
+};
+
+}  // namespace perch

@@ -1,0 +1,236 @@
+#include "tasks/task_eval.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "learner/policy.h"
+#include "tasks/sit.h"
+#include "tasks/turn.h"
+
+namespace perch {
+
+std::array<double, 2> WilsonInterval95(int k, int n) {
+  if (n <= 0) return {0.0, 1.0};
+  const double z = 1.959963984540054, p = static_cast<double>(k) / n;
+  const double denom = 1 + z * z / n;
+  const double centre = (p + z * z / (2.0 * n)) / denom;
+  const double half = z * std::sqrt(p * (1 - p) / n + z * z / (4.0 * n * n)) / denom;
+  return {std::max(0.0, centre - half), std::min(1.0, centre + half)};
+}
+
+Json EvaluateEpisodes(const TaskEnvConfig& config, const proto::ModelWeights& weights,
+                      const EvalOptions& o, EpisodeMetrics* metrics, EvalRecording* rec) {
+  if (o.episodes < 1) throw ConfigError("eval: --episodes must be >= 1");
+  std::unique_ptr<HumanoidChairEnv> env = MakeTaskHumanoidEnv(config);
+  const EnvSpec& spec = env->spec();
+  const PolicyConfig pc = PolicyConfigFromShape(weights.shape(), "model");
+  if (pc.kind != PolicyKind::kGaussian || pc.obs_dim != spec.obs_dim ||
+      pc.act_dim != spec.act_dim) {
+    throw ConfigError("model: shape " + weights.shape().kind() + " obs " +
+                      std::to_string(pc.obs_dim) + " act " + std::to_string(pc.act_dim) +
+                      " does not fit the " + config.env.task + " env (gaussian obs " +
+                      std::to_string(spec.obs_dim) + " act " + std::to_string(spec.act_dim) + ")");
+  }
+  PolicyRunner runner(pc, NormalizerConfig());
+  runner.LoadWeights(weights);
+  runner.set_update_obs_stats(false);  // evaluation must not move the normaliser
+
+  const double dt = spec.control_dt;
+  const int max_steps = std::max(spec.max_episode_steps, metrics->MinEpisodeSteps(*env));
+  std::vector<float> obs(spec.obs_dim), next(spec.obs_dim), action(spec.act_dim);
+  int successes = 0, falls = 0, invalid = 0;
+  int64_t steps_total = 0;
+  double sum_return = 0, sum_sim = 0;
+  Json fall_times = Json::array(), fall_episodes = Json::array();
+  for (int e = 0; e < o.episodes; ++e) {
+    // Episode e depends only on (seed, e), as in walk's evaluation.
+    const uint64_t episode_seed = o.seed * 1000003ULL + static_cast<uint64_t>(e);
+    env->Seed(2 * episode_seed);
+    Rng act_rng(2 * episode_seed + 1);
+    env->Reset(obs.data());
+    metrics->Start(*env);
+    auto record = [&](int step) {
+      if (e != 0 || rec == nullptr) return;
+      const HumanoidState& s = env->humanoid_state();
+      PoseFrame f;
+      f.root_pos = s.root_pos;
+      f.root_quat = s.root_quat;
+      f.q.assign(s.q.begin(), s.q.end());
+      f.time_s = step * dt;
+      rec->frames.push_back(f);
+    };
+    record(0);
+    int steps = 0;
+    bool fell = false;
+    while (steps < max_steps) {
+      runner.Act(obs.data(), act_rng, !o.stochastic, nullptr, action.data());
+      const StepResult r = env->Step(action.data(), next.data());
+      ++steps;
+      sum_return += r.reward;
+      if (r.invalid) ++invalid;
+      if (!r.invalid) {
+        sum_sim += metrics->ImitationReward(*env);
+        metrics->Observe(*env, r);
+      }
+      record(steps);
+      obs.swap(next);
+      if (r.terminated) {
+        fell = true;
+        break;
+      }
+      // The task's time limit is lifted when the metric needs longer episodes.
+    }
+    if (fell) {
+      ++falls;
+      fall_times.push_back(steps * dt);
+      fall_episodes.push_back(e);
+    }
+    if (metrics->Finish(*env, fell)) ++successes;
+    steps_total += steps;
+  }
+  const double n = o.episodes;
+  const auto ci = WilsonInterval95(successes, o.episodes);
+  Json j{
+      {"task", config.env.task},
+      {"chair", config.env.chair},
+      {"model_version", weights.version()},
+      {"episodes", o.episodes},
+      {"seed", o.seed},
+      {"stochastic", o.stochastic},
+      {"episode_steps", max_steps},
+      {"successes", successes},
+      {"success_rate", successes / n},
+      {"success_ci95", {ci[0], ci[1]}},
+      {"fall_rate", falls / n},
+      {"invalid_episodes", invalid},
+      {"mean_episode_steps", steps_total / n},
+      {"mean_return", sum_return / n},
+      {"mean_imitation_reward", sum_sim / static_cast<double>(std::max<int64_t>(1, steps_total))},
+      {"fall_times_s", fall_times},
+      {"fall_episodes", fall_episodes}};
+  metrics->AddSummary(&j);
+  return j;
+}
+
+namespace {
+
+double MeanOf(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x;
+  return v.empty() ? 0.0 : s / v.size();
+}
+
+double Percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<size_t>(p * (v.size() - 1) + 0.5))];
+}
+
+// Turn: success = no early termination until success_after_end_s after the clip ends, and the
+// yaw then within success_yaw_tol_deg of the reference's last frame.
+class TurnMetrics : public EpisodeMetrics {
+ public:
+  int MinEpisodeSteps(const HumanoidChairEnv& env) const override {
+    return Task(env).SuccessStep();
+  }
+  void Start(const HumanoidChairEnv& env) override {
+    judged_ = false;
+    ok_ = false;
+  }
+  void Observe(const HumanoidChairEnv& env, const StepResult& r) override {
+    const TurnTask& t = Task(env);
+    if (judged_ || env.episode_step() < t.SuccessStep()) return;
+    judged_ = true;
+    const double err_deg = std::abs(t.last_terms().yaw_error_rad) * 180.0 / M_PI;
+    yaw_err_deg_.push_back(err_deg);
+    ok_ = !r.terminated && err_deg <= t.config().success_yaw_tol_deg;
+  }
+  bool Finish(const HumanoidChairEnv& env, bool fell) override {
+    if (!judged_) unjudged_ += 1;  // fell before the judging step
+    return judged_ && ok_;
+  }
+  double ImitationReward(const HumanoidChairEnv& env) const override {
+    return Task(env).last_terms().similarity;
+  }
+  void AddSummary(Json* j) const override {
+    (*j)["final_yaw_error_deg_mean"] = MeanOf(yaw_err_deg_);
+    (*j)["final_yaw_error_deg_p90"] = Percentile(yaw_err_deg_, 0.9);
+    (*j)["episodes_fell_before_judging"] = unjudged_;
+  }
+
+ private:
+  static const TurnTask& Task(const HumanoidChairEnv& env) {
+    return dynamic_cast<const TurnTask&>(env.task());
+  }
+  bool judged_ = false, ok_ = false;
+  int unjudged_ = 0;
+  std::vector<double> yaw_err_deg_;
+};
+
+// Sit: success = pelvis continuously on the seat (contact rule of the env) for success_contact_s;
+// for successes, the horizontal pelvis - seat target error and the torso heading error to the
+// chair's facing direction at the moment success is reached.
+class SitMetrics : public EpisodeMetrics {
+ public:
+  int MinEpisodeSteps(const HumanoidChairEnv& env) const override {
+    const SitTask& t = Task(env);
+    return static_cast<int>(std::ceil(t.config().eval_episode_s / t.control_dt() - 1e-9));
+  }
+  void Start(const HumanoidChairEnv& env) override {
+    run_ = 0;
+    success_ = false;
+    min_dist_ = env.PelvisSeatDistance();
+    first_contact_s_ = -1;
+  }
+  void Observe(const HumanoidChairEnv& env, const StepResult& r) override {
+    const SitTask& t = Task(env);
+    min_dist_ = std::min(min_dist_, env.PelvisSeatDistance());
+    const bool contact = env.PelvisSeatContact();
+    run_ = contact ? run_ + 1 : 0;
+    if (contact && first_contact_s_ < 0) first_contact_s_ = env.episode_step() * t.control_dt();
+    const int need =
+        static_cast<int>(std::ceil(t.config().success_contact_s / t.control_dt() - 1e-9));
+    if (!success_ && run_ >= need) {
+      success_ = true;
+      const Eigen::Vector3d d = env.PelvisPosition() - env.SeatTargetWorld();
+      pos_err_cm_.push_back(100.0 * d.head<2>().norm());
+      const double yaw = env.RootRpy().z();
+      rot_err_deg_.push_back(std::abs(AngleDiff(yaw, SitTask::ChairYaw(env))) * 180.0 / M_PI);
+      time_to_sit_s_.push_back(first_contact_s_);
+    }
+  }
+  bool Finish(const HumanoidChairEnv& env, bool fell) override {
+    min_dists_.push_back(min_dist_);
+    return success_;
+  }
+  double ImitationReward(const HumanoidChairEnv& env) const override {
+    return Task(env).last_terms().similarity;
+  }
+  void AddSummary(Json* j) const override {
+    (*j)["seat_position_error_cm_mean"] = MeanOf(pos_err_cm_);
+    (*j)["seat_position_error_cm_p90"] = Percentile(pos_err_cm_, 0.9);
+    (*j)["seat_orientation_error_deg_mean"] = MeanOf(rot_err_deg_);
+    (*j)["seat_orientation_error_deg_p90"] = Percentile(rot_err_deg_, 0.9);
+    (*j)["first_contact_s_mean"] = MeanOf(time_to_sit_s_);
+    double m = MeanOf(min_dists_), v = 0;
+    for (double x : min_dists_) v += (x - m) * (x - m);
+    (*j)["min_dist_mean_m"] = m;
+    (*j)["min_dist_std_m"] = min_dists_.empty() ? 0.0 : std::sqrt(v / min_dists_.size());
+  }
+
+ private:
+  static const SitTask& Task(const HumanoidChairEnv& env) {
+    return dynamic_cast<const SitTask&>(env.task());
+  }
+  int run_ = 0;
+  bool success_ = false;
+  double min_dist_ = 0, first_contact_s_ = -1;
+  std::vector<double> pos_err_cm_, rot_err_deg_, time_to_sit_s_, min_dists_;
+};
+
+}  // namespace
+
+std::unique_ptr<EpisodeMetrics> MakeTurnMetrics() { return std::make_unique<TurnMetrics>(); }
+std::unique_ptr<EpisodeMetrics> MakeSitMetrics() { return std::make_unique<SitMetrics>(); }
+
+}  // namespace perch

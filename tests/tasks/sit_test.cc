@@ -1,0 +1,142 @@
+#include "tasks/sit.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <vector>
+
+#include "common/paths.h"
+#include "tasks/task_env.h"
+
+namespace perch {
+namespace {
+
+std::unique_ptr<HumanoidChairEnv> MakeSitEnv(const Json& section, const Json& env_extra = {}) {
+  Json j{{"task", "sit"}};
+  if (!section.is_null()) j["sit"] = section;
+  if (env_extra.is_object()) j.update(env_extra);
+  return MakeTaskHumanoidEnv(TaskEnvConfig::FromJson(j, "test"));
+}
+
+const SitTask& TaskOf(const HumanoidChairEnv& env) {
+  return dynamic_cast<const SitTask&>(env.task());
+}
+
+TEST(SitTask, FiftySevenDimensionalStateWithTheChairFeature) {
+  auto env = MakeSitEnv(Json::object());
+  EXPECT_EQ(env->spec().obs_dim, 57);
+  EXPECT_EQ(env->spec().obs_slices.back().name, "chair");
+}
+
+TEST(SitTask, TheClipEndsWithThePelvisOverTheSeatForAnyChairPlacement) {
+  for (const Json& placement : {Json{{"x", 0.0}, {"y", 0.0}, {"yaw_deg", 0.0}},
+                                Json{{"x", 1.0}, {"y", -2.0}, {"yaw_deg", 90.0}},
+                                Json{{"x", -0.5}, {"y", 0.3}, {"yaw_deg", -150.0}}}) {
+    SCOPED_TRACE(placement.dump());
+    auto env =
+        MakeSitEnv(Json{{"reference_state_init", false}}, Json{{"chair_placement", placement}});
+    std::vector<float> obs(env->spec().obs_dim);
+    env->Seed(1);
+    env->Reset(obs.data());
+    const SitTask& t = TaskOf(*env);
+    const MotionPose end = t.ReferenceAt(t.ClipEndStep() + 10);
+    const FkResult fk = ForwardKinematics(env->model(), end.root_pos, end.root_rot, end.q.data());
+    const Eigen::Vector3d pelvis = fk.body_world[env->model().pelvis_body()].translation();
+    EXPECT_NEAR(pelvis.x(), env->SeatTargetWorld().x(), 1e-6);
+    EXPECT_NEAR(pelvis.y(), env->SeatTargetWorld().y(), 1e-6);
+    // Facing the chair's front, back to the seat: the start yaw is the chair's plus the clip's.
+    const double clip_yaw = RpyFromQuat(t.motion().frame(0).root_rot).z();
+    const double chair_yaw = placement["yaw_deg"].get<double>() * M_PI / 180.0;
+    EXPECT_NEAR(AngleDiff(env->RootRpy().z(), chair_yaw + clip_yaw), 0.0, 1e-6);
+    // The humanoid starts in front of the seat (along the chair's facing direction).
+    const Eigen::Vector2d facing(std::cos(chair_yaw), std::sin(chair_yaw));
+    const Eigen::Vector2d from_seat =
+        env->humanoid_state().root_pos.head<2>() - env->SeatTargetWorld().head<2>();
+    EXPECT_GT(from_seat.dot(facing), 0.2);
+  }
+}
+
+TEST(SitTask, ReferenceStateInitialisationDrawsAlongTheClipWithJointSpeedsZeroed) {
+  auto env = MakeSitEnv(Json::object());  // RSI on by default
+  std::vector<float> obs(env->spec().obs_dim);
+  double lo = 1e9, hi = -1e9;
+  const double dur = TaskOf(*env).motion().duration();
+  for (int seed = 0; seed < 20; ++seed) {
+    env->Seed(seed);
+    env->Reset(obs.data());
+    const double t0 = TaskOf(*env).start_time();
+    EXPECT_GE(t0, 0.0);
+    EXPECT_LE(t0, 0.8 * dur + 1e-9);
+    lo = std::min(lo, t0);
+    hi = std::max(hi, t0);
+    for (double qd : env->humanoid_state().qd) EXPECT_EQ(qd, 0.0);
+  }
+  EXPECT_GT(hi - lo, 0.5 * dur);
+  auto fixed = MakeSitEnv(Json{{"reference_state_init", false}});
+  fixed->Seed(3);
+  fixed->Reset(obs.data());
+  EXPECT_EQ(TaskOf(*fixed).start_time(), 0.0);
+  double speed = 0;
+  for (double qd : fixed->humanoid_state().qd) speed += std::abs(qd);
+  EXPECT_GT(speed, 0.0);  // frame 0 keeps the clip's joint speeds
+}
+
+TEST(SitTask, ApproachRewardIsTheSpeedTowardTheSeat) {
+  auto env = MakeSitEnv(Json{{"reference_state_init", false}});
+  std::vector<float> obs(env->spec().obs_dim), next(obs.size());
+  std::vector<float> zero(env->spec().act_dim, 0.0f);
+  env->Seed(2);
+  env->Reset(obs.data());
+  const double d0 = env->PelvisSeatDistance();
+  const StepResult r = env->Step(zero.data(), next.data());
+  const SitTerms& t = TaskOf(*env).last_terms();
+  const double dt = env->spec().control_dt;
+  EXPECT_NEAR(t.seat_distance_m, env->PelvisSeatDistance(), 1e-12);
+  EXPECT_NEAR(t.approach, 0.5 * (d0 - t.seat_distance_m) / dt, 1e-9);
+  EXPECT_NEAR(r.reward, t.similarity + t.approach, 1e-5);
+}
+
+TEST(SitTask, TerminatesBelowItsOwnRootHeight) {
+  // The start (root about 1.28 m) is above both thresholds; a threshold above it ends at once.
+  std::vector<float> obs(57), next(57), zero(21, 0.0f);
+  for (double min_z : {0.54, 1.5}) {
+    auto env = MakeSitEnv(Json{{"reference_state_init", false}, {"min_root_z", min_z}});
+    EXPECT_EQ(TaskOf(*env).config().min_root_z, min_z);
+    env->Seed(1);
+    env->Reset(obs.data());
+    EXPECT_EQ(env->Step(zero.data(), next.data()).terminated, min_z > 1.0) << min_z;
+  }
+  EXPECT_EQ(SitTaskConfig().min_root_z, 0.54);  // the paper's sit threshold (walk/turn: 0.78)
+}
+
+TEST(SitTask, ChairsItCannotUseAreRefusedByField) {
+  auto err = [](const Json& j) {
+    try {
+      TaskEnvConfig::FromJson(j, "f.json");
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_NE(err({{"task", "sit"}, {"chair", "none"}}).find("f.json.chair"), std::string::npos);
+  // A seat above the humanoid's hips.
+  Json chair = LoadJsonFile(ResolveProjectPath("data/chairs/armchair.json"));
+  chair["parametric"]["seat_height"] = 0.95;
+  const std::string path = ::testing::TempDir() + "/tall_chair.json";
+  std::ofstream(path) << chair.dump();
+  const std::string e = err({{"task", "sit"}, {"chair", path}});
+  EXPECT_NE(e.find("f.json.chair"), std::string::npos) << e;
+  EXPECT_NE(e.find("max_seat_height_m"), std::string::npos) << e;
+  EXPECT_NE(err({{"task", "sit"}, {"sit", {{"rsi_max_fraction", 1.5}}}}).find("rsi_max_fraction"),
+            std::string::npos);
+  // Every preset is usable.
+  for (const char* preset : {"authors", "armchair", "bench", "high", "low", "stool"}) {
+    EXPECT_EQ(err({{"task", "sit"}, {"chair", preset}}), "") << preset;
+  }
+}
+
+}  // namespace
+}  // namespace perch

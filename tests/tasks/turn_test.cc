@@ -1,0 +1,161 @@
+#include "tasks/turn.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <vector>
+
+#include "envs/spawn.h"
+#include "tasks/task_env.h"
+
+namespace perch {
+namespace {
+
+std::unique_ptr<HumanoidChairEnv> MakeTurnEnv(const std::string& task, const Json& section = {}) {
+  Json j{{"task", task}, {"chair", "none"}};
+  if (!section.is_null()) j[task] = section;
+  return MakeTaskHumanoidEnv(TaskEnvConfig::FromJson(j, "test"));
+}
+
+const TurnTask& TaskOf(const HumanoidChairEnv& env) {
+  return dynamic_cast<const TurnTask&>(env.task());
+}
+
+TEST(TurnTask, FiftyDimensionalStateAndClipByName) {
+  for (const char* name : {"turn_left", "turn_right"}) {
+    auto env = MakeTurnEnv(name);
+    EXPECT_EQ(env->spec().obs_dim, 50) << name;
+    EXPECT_EQ(env->spec().max_episode_steps, 300) << name;
+    EXPECT_EQ(TaskOf(*env).motion().name(), name);
+  }
+}
+
+TEST(TurnTask, StartsAtFrameZeroOverTheOriginWithARandomYaw) {
+  auto env = MakeTurnEnv("turn_left");
+  std::vector<float> obs(env->spec().obs_dim);
+  const MotionPose f0 = TaskOf(*env).motion().frame(0);
+  const double clip_yaw = RpyFromQuat(f0.root_rot).z();
+  std::vector<double> yaws;
+  for (int seed = 0; seed < 6; ++seed) {
+    env->Seed(seed);
+    env->Reset(obs.data());
+    const HumanoidState& s = env->humanoid_state();
+    EXPECT_NEAR(s.root_pos.x(), 0.0, 1e-6);
+    EXPECT_NEAR(s.root_pos.y(), 0.0, 1e-6);
+    for (int j = 0; j < HumanoidModel::kNumJoints; ++j) EXPECT_NEAR(s.q[j], f0.q[j], 1e-6);
+    const double offset = TaskOf(*env).GetMemory().placement.yaw;
+    EXPECT_LE(std::abs(offset), M_PI);
+    EXPECT_NEAR(AngleDiff(env->RootRpy().z(), clip_yaw + offset), 0.0, 1e-6);
+    yaws.push_back(offset);
+  }
+  std::sort(yaws.begin(), yaws.end());
+  EXPECT_GT(yaws.back() - yaws.front(), 1.0);  // U(-pi, pi) spreads
+  // yaw_offset_max_deg 0: every episode in the clip's own heading.
+  auto fixed = MakeTurnEnv("turn_left", Json{{"yaw_offset_max_deg", 0.0}});
+  fixed->Seed(3);
+  fixed->Reset(obs.data());
+  EXPECT_EQ(TaskOf(*fixed).GetMemory().placement.yaw, 0.0);
+}
+
+// The same start rotated about the root by `deg`; the task keeps its reference placement.
+HumanoidState Rotated(const HumanoidState& s, double deg) {
+  const double a = deg * M_PI / 180.0;
+  const Eigen::Vector2d p = s.root_pos.head<2>();
+  HumanoidState r = TransformHorizontally(s, a, 0, 0);
+  r.root_pos.head<2>() = p;
+  return r;
+}
+
+TEST(TurnTask, TerminatesWhenTheYawLeavesTheReferenceByMoreThan45Degrees) {
+  auto env = MakeTurnEnv("turn_right");
+  std::vector<float> obs(env->spec().obs_dim), next(obs.size());
+  std::vector<float> zero(env->spec().act_dim, 0.0f);
+  env->Seed(5);
+  env->Reset(obs.data());
+  const HumanoidState start = env->humanoid_state();
+  env->ResetToState(Rotated(start, 60.0), obs.data());
+  StepResult r = env->Step(zero.data(), next.data());
+  EXPECT_TRUE(r.terminated);
+  EXPECT_GT(std::abs(TaskOf(*env).last_terms().yaw_error_rad), M_PI / 4);
+  env->ResetToState(Rotated(start, 20.0), obs.data());
+  r = env->Step(zero.data(), next.data());
+  EXPECT_FALSE(r.terminated);
+  EXPECT_NEAR(std::abs(TaskOf(*env).last_terms().yaw_error_rad), 20.0 * M_PI / 180.0, 0.05);
+  // A looser threshold from the config keeps the 60 deg start alive.
+  auto loose = MakeTurnEnv("turn_right", Json{{"max_yaw_error_deg", 90.0}});
+  loose->Seed(5);
+  loose->Reset(obs.data());
+  loose->ResetToState(Rotated(loose->humanoid_state(), 60.0), obs.data());
+  EXPECT_FALSE(loose->Step(zero.data(), next.data()).terminated);
+}
+
+TEST(TurnTask, TerminatesBelowTheRootHeight) {
+  auto env = MakeTurnEnv("turn_left");
+  std::vector<float> obs(env->spec().obs_dim), next(obs.size());
+  std::vector<float> zero(env->spec().act_dim, 0.0f);
+  env->Seed(1);
+  env->Reset(obs.data());
+  HumanoidState low = env->humanoid_state();
+  low.root_pos.z() = 0.7;
+  env->ResetToState(low, obs.data());
+  EXPECT_TRUE(env->Step(zero.data(), next.data()).terminated);
+}
+
+TEST(TurnTask, RewardIsSimilarityPlusRootRotationAndTheAuthorsHoldPhase) {
+  auto env = MakeTurnEnv("turn_left");
+  std::vector<float> obs(env->spec().obs_dim), next(obs.size());
+  std::vector<float> zero(env->spec().act_dim, 0.0f);
+  env->Seed(2);
+  env->Reset(obs.data());
+  const StepResult r = env->Step(zero.data(), next.data());
+  const TurnTerms& t = TaskOf(*env).last_terms();
+  EXPECT_NEAR(r.reward, t.similarity + t.rotation, 1e-5);
+  EXPECT_EQ(t.root_vel, 0.0);   // paper: no root-velocity term
+  EXPECT_GT(t.rotation, 0.09);  // one step from the reference: Eq. 6 close to its weight 0.1
+  EXPECT_LE(t.rotation, 0.1);
+  EXPECT_GT(t.pose, 0.9);
+
+  // Authors: root velocity term while the clip runs; pose + rotation + energy once it ended.
+  auto a = MakeTurnEnv("turn_left", Json{{"reward_variant", "authors"}});
+  a->Seed(2);
+  a->Reset(obs.data());
+  a->Step(zero.data(), next.data());
+  EXPECT_GT(TaskOf(*a).last_terms().root_vel, 0.0);
+  const int end = TaskOf(*a).ClipEndStep();
+  std::vector<float> push(a->spec().act_dim, 0.3f);
+  bool fell = false;
+  for (int k = 1; k <= end && !fell; ++k) fell = a->Step(push.data(), next.data()).terminated;
+  if (!fell) {
+    const TurnTerms& h = TaskOf(*a).last_terms();
+    EXPECT_LT(h.energy, 0.0);  // the energy term of the hold phase is a cost
+    EXPECT_EQ(h.root_vel, 0.0);
+    EXPECT_NEAR(h.similarity, 0.5 * h.pose, 1e-9);
+  }
+}
+
+TEST(TurnTask, ConfigErrorsNameTheField) {
+  auto err = [](const Json& j) {
+    try {
+      TaskEnvConfig::FromJson(j, "f.json");
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_NE(err({{"task", "turn_left"}, {"turn_left", {{"rot_wieght", 1}}}}).find("rot_wieght"),
+            std::string::npos);
+  EXPECT_NE(err({{"task", "turn_left"}, {"turn_left", {{"max_yaw_error_deg", 0}}}})
+                .find("f.json.turn_left.max_yaw_error_deg"),
+            std::string::npos);
+  EXPECT_NE(err({{"task", "turn_left"}, {"obs_layout", "proprio_goal"}}).find("f.json.obs_layout"),
+            std::string::npos);
+  EXPECT_NE(err({{"task", "turn_left"}, {"sit", Json::object()}}).find("f.json.sit"),
+            std::string::npos);
+  EXPECT_NE(err({{"task", "turn_left"}, {"turn_left", {{"reward_variant", "mine"}}}})
+                .find("reward_variant"),
+            std::string::npos);
+}
+
+}  // namespace
+}  // namespace perch
