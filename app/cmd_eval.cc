@@ -126,7 +126,9 @@ TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_p
     sec["reward_variant"] = o.variant;
   }
   if (!o.action_mode.empty()) j["action_mode"] = o.action_mode;
-  if (!o.chair.empty()) j["chair"] = o.chair;
+  if (!o.chair.empty() && o.chair != "all") j["chair"] = o.chair;
+  // Evaluation measures the chair asked for, not a training distribution of chairs.
+  if (j.contains("chair_random")) j["chair_random"]["prob"] = 0.0;
   if (task == "stand") j.erase("walk");
   return TaskEnvConfig::FromJson(j, ctx);
 }
@@ -163,8 +165,8 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "task env config JSON, or an experiment / run config.json (its env section); "
                   "default: the config saved with the model, else the task's defaults");
   cmd->add_option("--chair", o->cfg.chair,
-                  "chair override: a preset in data/chairs/ (authors, armchair, ...) or a chair "
-                  "JSON file");
+                  "chair override: a preset in data/chairs/ (authors, armchair, ...), a chair "
+                  "JSON file, or all (every preset, one result each)");
   cmd->add_option("--start", o->cfg.start,
                   "episode start override: fixed (the config's initial pose / the clip's first "
                   "frame) or reference (a random phase of the reference motion)")
@@ -203,6 +205,30 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
               << "\n";
     const TaskDef& def = GetTask(config.env.task, "--task");
     if (!def.evaluate) throw ConfigError("--task " + def.name + ": has no evaluation");
+    if (o->cfg.chair == "all") {
+      // Every preset in data/chairs/, one row each (the many-chairs table).
+      Json table = Json::object();
+      for (const std::string& preset : Chair::PresetNames()) {
+        ConfigOverrides co = o->cfg;
+        co.chair = preset;
+        const TaskEnvConfig cc = ResolveConfig(co, o->model);
+        std::cerr << "eval: chair " << preset << "\n";
+        Json r = def.evaluate(cc, weights, o->eval, nullptr);
+        r.erase("fall_times_s");
+        r.erase("fall_episodes");
+        table[preset] = r;
+      }
+      Json result{{"model", model_file}, {"task", config.env.task}, {"per_chair", table}};
+      if (o->json) {
+        std::cout << result.dump() << "\n";
+      } else {
+        for (const auto& [name, r] : table.items()) {
+          std::cout << name << ": success_rate " << r["success_rate"] << " "
+                    << r["success_ci95"].dump() << "\n";
+        }
+      }
+      return;
+    }
     Json result = def.evaluate(config, weights, o->eval, o->filmstrip.empty() ? nullptr : &rec);
     result["model"] = model_file;
     result["config"] = config.ToJson();

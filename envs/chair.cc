@@ -1,6 +1,8 @@
 #include "envs/chair.h"
 
+#include <algorithm>
 #include <cmath>
+#include <filesystem>
 
 namespace perch {
 namespace {
@@ -35,11 +37,11 @@ ChairBox Box(const char* role, double x0, double x1, double y0, double y1, doubl
 
 // Boxes of a four-legged chair centred under the seat, facing +x.
 std::vector<ChairBox> BuildParametric(const Json& p, const std::string& ctx) {
-  CheckKnownKeys(p,
-                 {"seat_height", "seat_width", "seat_depth", "seat_thickness", "leg_size",
-                  "leg_clearance", "backrest_height", "backrest_thickness", "armrest_height",
-                  "armrest_width"},
-                 ctx);
+  CheckKnownKeys(
+      p,
+      {"seat_height", "seat_width", "seat_depth", "seat_thickness", "leg_size", "leg_clearance",
+       "backrest_height", "backrest_thickness", "armrest_height", "armrest_width"},
+      ctx);
   const double h = ReadLength(p, "seat_height", 0.4029, false, ctx);
   const double w = ReadLength(p, "seat_width", 0.378, false, ctx);
   const double d = ReadLength(p, "seat_depth", 0.342, false, ctx);
@@ -73,6 +75,16 @@ std::vector<ChairBox> BuildParametric(const Json& p, const std::string& ctx) {
 
 std::string Chair::PresetPath(const std::string& preset) {
   return std::string(PERCH_SOURCE_DIR) + "/data/chairs/" + preset + ".json";
+}
+
+std::vector<std::string> Chair::PresetNames() {
+  std::vector<std::string> names;
+  const std::filesystem::path dir = std::filesystem::path(PERCH_SOURCE_DIR) / "data" / "chairs";
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    if (e.path().extension() == ".json") names.push_back(e.path().stem().string());
+  }
+  std::sort(names.begin(), names.end());
+  return names;
 }
 
 Chair Chair::Load(const std::string& path) { return FromJson(LoadJsonFile(path), path); }

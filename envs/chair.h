@@ -37,6 +37,7 @@ struct Chair {
   static Chair Load(const std::string& path);
   static Chair FromJson(const Json& j, const std::string& ctx);
   static std::string PresetPath(const std::string& preset);  // data/chairs/<preset>.json
+  static std::vector<std::string> PresetNames();              // sorted
 };
 
 }  // namespace perch

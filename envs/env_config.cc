@@ -1,5 +1,6 @@
 #include "envs/env_config.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace perch {
@@ -21,11 +22,12 @@ void CheckRange(const std::array<double, 2>& r, const std::string& where) {
 EnvConfig EnvConfig::Load(const std::string& path) { return FromJson(LoadJsonFile(path), path); }
 
 EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
-  CheckKnownKeys(j,
-                 {"_comment", "humanoid_file", "chair", "chair_placement", "physics", "action_mode",
-                  "pd_implicit", "obs_layout", "obs", "spawn", "init", "safety", "seat_contact_max_pelvis_z",
-                  "task", "stand"},
-                 ctx);
+  CheckKnownKeys(
+      j,
+      {"_comment", "humanoid_file", "chair", "chair_placement", "physics", "action_mode",
+       "pd_implicit", "obs_layout", "obs", "spawn", "init", "safety", "seat_contact_max_pelvis_z",
+       "seat_contact_relative", "chair_random", "task", "stand"},
+      ctx);
   EnvConfig c;
   GetOptional(j, "humanoid_file", c.humanoid_file, ctx);
   GetOptional(j, "chair", c.chair, ctx);
@@ -56,8 +58,8 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
   if (j.contains("obs")) {
     const Json& o = j["obs"];
     const std::string oc = ctx + ".obs";
-    CheckKnownKeys(o, {"initial_z", "velocity_scale", "joint_speed_scale", "clip", "foot_contact_lag"},
-                   oc);
+    CheckKnownKeys(
+        o, {"initial_z", "velocity_scale", "joint_speed_scale", "clip", "foot_contact_lag"}, oc);
     GetOptional(o, "initial_z", c.obs.initial_z, oc);
     GetOptional(o, "velocity_scale", c.obs.velocity_scale, oc);
     GetOptional(o, "joint_speed_scale", c.obs.joint_speed_scale, oc);
@@ -82,7 +84,8 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
     GetOptional(s, "zone1_deg", c.spawn.zone1_deg, sc);
     GetOptional(s, "zone2_deg", c.spawn.zone2_deg, sc);
     GetOptional(s, "zone3_deg", c.spawn.zone3_deg, sc);
-    if (c.spawn.zone < 0 || c.spawn.zone > 3) throw ConfigError(sc + ".zone: expected 0, 1, 2 or 3");
+    if (c.spawn.zone < 0 || c.spawn.zone > 3)
+      throw ConfigError(sc + ".zone: expected 0, 1, 2 or 3");
     if (!(c.spawn.radius >= 0.0)) throw ConfigError(sc + ".radius: must be >= 0");
     CheckRange(c.spawn.zone1_deg, sc + ".zone1_deg");
     CheckRange(c.spawn.zone2_deg, sc + ".zone2_deg");
@@ -101,14 +104,55 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
   if (j.contains("safety")) {
     const Json& s = j["safety"];
     const std::string sc = ctx + ".safety";
-    CheckKnownKeys(s, {"max_joint_speed", "max_root_speed", "max_root_ang_speed", "max_abs_position"},
-                   sc);
+    CheckKnownKeys(
+        s, {"max_joint_speed", "max_root_speed", "max_root_ang_speed", "max_abs_position"}, sc);
     GetOptional(s, "max_joint_speed", c.safety.max_joint_speed, sc);
     GetOptional(s, "max_root_speed", c.safety.max_root_speed, sc);
     GetOptional(s, "max_root_ang_speed", c.safety.max_root_ang_speed, sc);
     GetOptional(s, "max_abs_position", c.safety.max_abs_position, sc);
   }
   GetOptional(j, "seat_contact_max_pelvis_z", c.seat_contact_max_pelvis_z, ctx);
+  GetOptional(j, "seat_contact_relative", c.seat_contact_relative, ctx);
+  if (j.contains("chair_random")) {
+    const Json& r = j["chair_random"];
+    const std::string rc = ctx + ".chair_random";
+    ChairRandomConfig& cr = c.chair_random;
+    CheckKnownKeys(
+        r,
+        {"prob", "seat_height", "seat_width", "seat_depth", "seat_thickness", "leg_size",
+         "backrest_prob", "backrest_height", "armrest_prob", "armrest_height", "mass", "dynamic"},
+        rc);
+    GetOptional(r, "prob", cr.prob, rc);
+    GetOptional(r, "backrest_prob", cr.backrest_prob, rc);
+    GetOptional(r, "armrest_prob", cr.armrest_prob, rc);
+    GetOptional(r, "mass", cr.mass, rc);
+    GetOptional(r, "dynamic", cr.dynamic, rc);
+    for (const char* p : {"prob", "backrest_prob", "armrest_prob"}) {
+      const double v = r.value(p, 0.0);
+      if (!(v >= 0 && v <= 1)) throw ConfigError(rc + "." + p + ": must be in [0, 1]");
+    }
+    if (!(cr.mass > 0)) throw ConfigError(rc + ".mass: must be > 0");
+    struct Range {
+      const char* name;
+      std::array<double, 2>* v;
+    };
+    for (const Range& x :
+         {Range{"seat_height", &cr.seat_height}, Range{"seat_width", &cr.seat_width},
+          Range{"seat_depth", &cr.seat_depth}, Range{"seat_thickness", &cr.seat_thickness},
+          Range{"leg_size", &cr.leg_size}, Range{"backrest_height", &cr.backrest_height},
+          Range{"armrest_height", &cr.armrest_height}}) {
+      GetOptional(r, x.name, *x.v, rc);
+      if (!((*x.v)[0] > 0 && (*x.v)[0] <= (*x.v)[1] && (*x.v)[1] < 2.0)) {
+        throw ConfigError(rc + "." + x.name + ": expected [lo, hi] with 0 < lo <= hi < 2 m");
+      }
+    }
+    if (cr.seat_thickness[1] >= cr.seat_height[0]) {
+      throw ConfigError(rc + ".seat_thickness: must stay below seat_height");
+    }
+    if (2 * cr.leg_size[1] >= std::min(cr.seat_width[0], cr.seat_depth[0])) {
+      throw ConfigError(rc + ".leg_size: legs wider than the smallest seat");
+    }
+  }
   GetOptional(j, "task", c.task, ctx);
   // Tasks other than "stand" are built and their names checked by tasks/ (tasks/registry.h).
   if (c.task.empty()) throw ConfigError(ctx + ".task: must not be empty");
@@ -135,7 +179,9 @@ Json EnvConfig::ToJson() const {
       {"humanoid_file", humanoid_file},
       {"chair", chair},
       {"chair_placement",
-       {{"x", chair_placement.x}, {"y", chair_placement.y}, {"yaw_deg", chair_placement.yaw * 180.0 / M_PI}}},
+       {{"x", chair_placement.x},
+        {"y", chair_placement.y},
+        {"yaw_deg", chair_placement.yaw * 180.0 / M_PI}}},
       {"physics", physics.ToJson()},
       {"action_mode", action_mode == ActionMode::kTorque ? "torque" : "pd"},
       {"pd_implicit", pd_implicit},
@@ -168,6 +214,20 @@ Json EnvConfig::ToJson() const {
         {"max_root_ang_speed", safety.max_root_ang_speed},
         {"max_abs_position", safety.max_abs_position}}},
       {"seat_contact_max_pelvis_z", seat_contact_max_pelvis_z},
+      {"seat_contact_relative", seat_contact_relative},
+      {"chair_random",
+       {{"prob", chair_random.prob},
+        {"seat_height", chair_random.seat_height},
+        {"seat_width", chair_random.seat_width},
+        {"seat_depth", chair_random.seat_depth},
+        {"seat_thickness", chair_random.seat_thickness},
+        {"leg_size", chair_random.leg_size},
+        {"backrest_prob", chair_random.backrest_prob},
+        {"backrest_height", chair_random.backrest_height},
+        {"armrest_prob", chair_random.armrest_prob},
+        {"armrest_height", chair_random.armrest_height},
+        {"mass", chair_random.mass},
+        {"dynamic", chair_random.dynamic}}},
       {"task", task},
       {"stand",
        {{"alive_bonus", stand.alive_bonus},

@@ -71,6 +71,24 @@ struct StandTaskConfig {
   std::array<double, 2> walk_target{1000.0, 0.0};  // goal features: Roboschool's default [m]
 };
 
+// Random chairs per episode (ours; the paper used one chair): with probability `prob` an episode's
+// chair is a four-legged parametric chair (envs/chair.h) with sizes drawn uniformly from these
+// ranges [m] and a backrest / armrests with the given probabilities, instead of env.chair.
+struct ChairRandomConfig {
+  double prob = 0.0;  // 0: always env.chair
+  std::array<double, 2> seat_height{0.33, 0.52};
+  std::array<double, 2> seat_width{0.36, 0.9};
+  std::array<double, 2> seat_depth{0.33, 0.48};
+  std::array<double, 2> seat_thickness{0.04, 0.08};
+  std::array<double, 2> leg_size{0.03, 0.05};
+  double backrest_prob = 0.6;
+  std::array<double, 2> backrest_height{0.3, 0.5};
+  double armrest_prob = 0.3;
+  std::array<double, 2> armrest_height{0.15, 0.25};
+  double mass = 1000.0;  // [kg], as the authors' chair
+  bool dynamic = true;
+};
+
 struct EnvConfig {
   std::string humanoid_file = "data/humanoid.json";  // relative paths: from the source tree
   std::string chair = "authors";  // a preset in data/chairs/, a path to a .json, or "none"
@@ -85,6 +103,10 @@ struct EnvConfig {
   InitConfig init;
   SafetyConfig safety;
   double seat_contact_max_pelvis_z = 0.54;  // contact = pelvis touches chair AND pelvis z < this
+  // The threshold follows the seat: max_pelvis_z + (seat height - the authors' 0.4029 m), so it is
+  // the authors' 0.54 m on their chair and the same height above the seat on any other (ours).
+  bool seat_contact_relative = true;
+  ChairRandomConfig chair_random;
   // The task by name: "stand" is built here; the others (walk, turn_left, turn_right, sit) by
   // tasks/ (tasks/registry.h), which checks the name.
   std::string task = "stand";

@@ -37,6 +37,25 @@ HumanoidState LoadInitPose(const EnvConfig& c, const HumanoidModel& model) {
   return StateFromQpos(a.values.data() + 51 * c.init.qpos_row);
 }
 
+// A four-legged parametric chair with sizes drawn from the config's ranges.
+Chair RandomChair(const ChairRandomConfig& c, Rng& rng) {
+  auto draw = [&](const std::array<double, 2>& r) { return rng.Uniform(r[0], r[1]); };
+  Json p{{"seat_height", draw(c.seat_height)},
+         {"seat_width", draw(c.seat_width)},
+         {"seat_depth", draw(c.seat_depth)},
+         {"seat_thickness", draw(c.seat_thickness)},
+         {"leg_size", draw(c.leg_size)}};
+  const bool back = rng.Uniform(0.0, 1.0) < c.backrest_prob;
+  const double back_h = draw(c.backrest_height);
+  const bool arms = rng.Uniform(0.0, 1.0) < c.armrest_prob;
+  const double arm_h = draw(c.armrest_height);
+  p["backrest_height"] = back ? back_h : 0.0;
+  p["armrest_height"] = arms ? arm_h : 0.0;
+  return Chair::FromJson(
+      Json{{"name", "random"}, {"parametric", p}, {"mass", c.mass}, {"dynamic", c.dynamic}},
+      "chair_random");
+}
+
 }  // namespace
 
 // ---- stand task ------------------------------------------------------------------------------
@@ -57,7 +76,8 @@ class StandTask : public Task {
     const int n = env.model().num_joints();
     for (int i = 0; i < n; ++i) a2 += static_cast<double>(action[i]) * action[i];
     r.terminated = s.root_pos.z() < c_.min_torso_z;
-    r.reward = static_cast<float>(c_.alive_bonus + c_.upright_weight * up_z - c_.action_cost * a2 / n);
+    r.reward =
+        static_cast<float>(c_.alive_bonus + c_.upright_weight * up_z - c_.action_cost * a2 / n);
     return r;
   }
 
@@ -78,8 +98,8 @@ HumanoidState StandingPose(const HumanoidModel& model, double clearance) {
   for (int j = 0; j < model.num_joints(); ++j) {
     s.q[j] = std::clamp(0.0, model.joint(j).lower, model.joint(j).upper);
   }
-  const FkResult fk = ForwardKinematics(model, Eigen::Vector3d::Zero(),
-                                        Eigen::Quaterniond::Identity(), s.q.data());
+  const FkResult fk =
+      ForwardKinematics(model, Eigen::Vector3d::Zero(), Eigen::Quaterniond::Identity(), s.q.data());
   s.root_pos = Eigen::Vector3d(0, 0, clearance - LowestGeomZ(model, fk));
   return s;
 }
@@ -94,17 +114,18 @@ HumanoidState SeatedPose(const HumanoidModel& model, const Chair& chair,
   // seat; the hips flex less by the same angle, keeping the thighs level and the shins vertical.
   const double tilt = kSeatedPelvisTilt;
   s.q[model.FindJoint("abdomen_y")] = -tilt;
-  for (const char* name : {"right_hip_y", "left_hip_y"}) s.q[model.FindJoint(name)] = -M_PI / 2 + tilt;
+  for (const char* name : {"right_hip_y", "left_hip_y"})
+    s.q[model.FindJoint(name)] = -M_PI / 2 + tilt;
   for (const char* name : {"right_knee", "left_knee"}) s.q[model.FindJoint(name)] = -M_PI / 2;
   // Lowest point of the pelvis and thighs `clearance` above the seat top; pelvis over the target.
-  const FkResult fk = ForwardKinematics(model, Eigen::Vector3d::Zero(),
-                                        Eigen::Quaterniond::Identity(), s.q.data());
+  const FkResult fk =
+      ForwardKinematics(model, Eigen::Vector3d::Zero(), Eigen::Quaterniond::Identity(), s.q.data());
   const int pelvis = model.pelvis_body();
   double low = 1e9;
   for (int b : {pelvis, model.FindBody("right_thigh"), model.FindBody("left_thigh")}) {
     for (const Geom& g : model.body(b).geoms) {
-      low = std::min(low, std::min((fk.body_world[b] * g.from).z(), (fk.body_world[b] * g.to).z()) -
-                              g.radius);
+      low = std::min(
+          low, std::min((fk.body_world[b] * g.from).z(), (fk.body_world[b] * g.to).z()) - g.radius);
     }
   }
   const Eigen::Vector3d pelvis_pos = fk.body_world[pelvis].translation();
@@ -115,8 +136,9 @@ HumanoidState SeatedPose(const HumanoidModel& model, const Chair& chair,
     double rear = 1e9;
     for (int b : {0, model.FindBody("lwaist"), pelvis}) {
       for (const Geom& g : model.body(b).geoms) {
-        rear = std::min(rear, std::min((fk.body_world[b] * g.from).x(), (fk.body_world[b] * g.to).x()) -
-                                  g.radius);
+        rear = std::min(
+            rear,
+            std::min((fk.body_world[b] * g.from).x(), (fk.body_world[b] * g.to).x()) - g.radius);
       }
     }
     x = std::max(x, box.max.x() + clearance - rear);
@@ -161,6 +183,16 @@ void HumanoidChairEnv::BuildSpec() {
 }
 
 void HumanoidChairEnv::Reset(float* obs) {
+  // The coin is only tossed when random chairs are on, so other runs draw as before.
+  if (chair_ && config_.chair_random.prob > 0) {
+    if (!base_chair_) base_chair_ = std::make_unique<Chair>(*chair_);
+    if (rng_.Uniform(0.0, 1.0) < config_.chair_random.prob) {
+      chair_ = std::make_unique<Chair>(RandomChair(config_.chair_random, rng_));
+    } else {
+      chair_ = std::make_unique<Chair>(*base_chair_);
+    }
+    world_->SetChair(chair_.get());
+  }
   HumanoidState chosen;
   if (task_->InitialState(*this, rng_, &chosen)) {
     ResetToState(chosen, obs);
@@ -273,15 +305,22 @@ bool HumanoidChairEnv::StateInvalid() const {
     return true;
   }
   for (int j = 0; j < model_.num_joints(); ++j) {
-    if (!std::isfinite(s.q[j]) || !std::isfinite(s.qd[j]) || std::abs(s.qd[j]) > c.max_joint_speed) {
+    if (!std::isfinite(s.q[j]) || !std::isfinite(s.qd[j]) ||
+        std::abs(s.qd[j]) > c.max_joint_speed) {
       return true;
     }
   }
   return false;
 }
 
+double HumanoidChairEnv::SeatContactMaxPelvisZ() const {
+  constexpr double kAuthorsSeatHeight = 0.4029;  // the top of the authors' seat (notes 5) [m]
+  if (!config_.seat_contact_relative || !chair_) return config_.seat_contact_max_pelvis_z;
+  return config_.seat_contact_max_pelvis_z - kAuthorsSeatHeight + chair_->seat_height();
+}
+
 bool HumanoidChairEnv::PelvisSeatContact() const {
-  return contacts_.pelvis_chair && PelvisPosition().z() < config_.seat_contact_max_pelvis_z;
+  return contacts_.pelvis_chair && PelvisPosition().z() < SeatContactMaxPelvisZ();
 }
 
 double HumanoidChairEnv::PelvisSeatDistance() const {
@@ -327,7 +366,8 @@ void HumanoidChairEnv::WriteObs(float* obs) {
   } else if (config_.obs_layout == ObsLayout::kProprioChair) {
     // chair(7): pelvis -> seat target in the torso frame; conjugate torso quaternion relative to
     // the chair frame (= world for the authors' unrotated chair), x y z w with w >= 0.
-    const Eigen::Vector3d p = s.root_quat.conjugate() * (world_->SeatTargetWorld() - PelvisPosition());
+    const Eigen::Vector3d p =
+        s.root_quat.conjugate() * (world_->SeatTargetWorld() - PelvisPosition());
     for (int i = 0; i < 3; ++i) obs[k++] = Clip(p[i], clip);
     const Eigen::Quaterniond chair_rot(
         Eigen::AngleAxisd(config_.chair_placement.yaw, Eigen::Vector3d::UnitZ()));

@@ -86,8 +86,11 @@ class HumanoidChairEnv : public Env {
   Eigen::Vector3d RootRpy() const { return rpy_; }
   Eigen::Vector3d BodyPosition(int body) const { return body_pos_[body]; }  // world [m]
   Eigen::Vector3d PelvisPosition() const { return body_pos_[model_.pelvis_body()]; }
-  // Pelvis touches the chair AND pelvis z < seat_contact_max_pelvis_z (notes 5).
+  // Pelvis touches the chair AND pelvis z < the contact height (notes 5; seat_contact_relative).
   bool PelvisSeatContact() const;
+  double SeatContactMaxPelvisZ() const;  // [m]
+  // This episode's chair (env.chair, or a random one under chair_random); null without a chair.
+  const Chair* chair() const { return chair_.get(); }
   double PelvisSeatDistance() const;  // 3-D distance pelvis - seat target [m]
   const Contacts& contacts() const { return contacts_; }  // current (not lagged)
   Eigen::Vector3d SeatTargetWorld() const { return world_->SeatTargetWorld(); }
@@ -113,7 +116,8 @@ class HumanoidChairEnv : public Env {
 
   EnvConfig config_;
   HumanoidModel model_;
-  std::unique_ptr<Chair> chair_;
+  std::unique_ptr<Chair> chair_;       // this episode's
+  std::unique_ptr<Chair> base_chair_;  // env.chair, when chair_random replaces it
   std::unique_ptr<World> world_;
   std::unique_ptr<Task> task_;
   EnvSpec spec_;

@@ -123,6 +123,10 @@ class World {
   // Contact points in all manifolds, and how many of them are between two humanoid bodies.
   int NumContactPoints(int* self_points = nullptr) const;
   bool has_chair() const { return chair_ != nullptr; }
+  // Another chair (not null when there was one; it must outlive the world), from the next
+  // SetState on: per-episode random chairs.
+  void SetChair(const Chair* chair) { chair_ = chair; }
+  const Chair* chair() const { return chair_; }
   Eigen::Isometry3d ChairPlacementTransform() const { return placement_.Transform(); }
   // The seat target (seat surface centre) at the chair's placement, world [m].
   Eigen::Vector3d SeatTargetWorld() const;

@@ -42,6 +42,12 @@ MotionPose ClipPlacement::Apply(const MotionPose& p) const {
   out.root_rot = Eigen::Quaterniond(rz) * p.root_rot;
   out.root_vel = rz * p.root_vel;
   out.root_angvel = rz * p.root_angvel;
+  if (descent_dz != 0.0 && z_top > z_bottom) {
+    const double w = std::clamp((z_top - p.root_pos.z()) / (z_top - z_bottom), 0.0, 1.0);
+    out.root_pos.z() += descent_dz * w;
+    // d/dt of the shift (inside the descent only).
+    if (w > 0.0 && w < 1.0) out.root_vel.z() -= descent_dz * p.root_vel.z() / (z_top - z_bottom);
+  }
   return out;
 }
 

@@ -28,10 +28,15 @@ struct EnergyCostConfig {
 };
 double EnergyCost(const EnergyCostConfig& c, const HumanoidChairEnv& env, const float* action);
 
-// The reference placed in the world for one episode: p_world = R_z(yaw) p_clip + offset.
+// The reference placed in the world for one episode: p_world = R_z(yaw) p_clip + offset, plus
+// (sit on a seat of another height) a vertical shift that grows with the root's descent:
+// z += descent_dz x clamp((z_top - z) / (z_top - z_bottom), 0, 1), so a standing frame stays on
+// the floor and the seated one lands on the seat.
 struct ClipPlacement {
   double yaw = 0.0;                                  // [rad]
   Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // [m]
+  double descent_dz = 0.0;                           // [m]
+  double z_top = 0.0, z_bottom = 0.0;                // clip root heights of the descent [m]
   MotionPose Apply(const MotionPose& p) const;
 };
 

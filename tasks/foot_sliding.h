@@ -1,8 +1,9 @@
 // Foot sliding as DAFNet measures it (§6.2): a toe slides in a frame when its toe-base point is
 // below 7 cm and moves faster than 0.4 cm/s. Our toe-base point is the front end of the foot
 // capsule's axis (its centre line, like a joint, not the surface). Counts the swing foot too while
-// it is low, so even a clean reference walk scores well above zero: compare with the reference. Fed with world body poses, from physics (perch eval) or from forward
-// kinematics (a reference motion), so the same meter checks both.
+// it is low, so even a clean reference walk scores well above zero: compare with the reference. Fed
+// with world body poses, from physics (perch eval) or from forward kinematics (a reference motion),
+// so the same meter checks both.
 #pragma once
 
 #include <Eigen/Geometry>
@@ -56,7 +57,6 @@ class FootSlidingMeter {
 // The meter on a reference motion played by forward kinematics for `seconds` at step dt, lowered
 // so that its lowest frame touches z = 0: the baseline a policy imitating it can be held against.
 FootSlidingMeter ReferenceFootSliding(const HumanoidModel& model, const ReferenceMotion& motion,
-                                      double seconds, double dt,
-                                      const FootSlidingOptions& options);
+                                      double seconds, double dt, const FootSlidingOptions& options);
 
 }  // namespace perch

@@ -31,8 +31,9 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   CheckKnownKeys(j,
                  {"reward_variant", "motion_file", "similarity", "approach_weight", "hold_phase",
                   "hold_pose_weight", "hold_energy_weight", "energy", "pelvis_end_offset",
-                  "reference_state_init", "rsi_max_fraction", "rsi_zero_joint_speeds", "min_root_z",
-                  "max_episode_steps", "success_contact_s", "eval_episode_s", "max_seat_height_m"},
+                  "clip_seat_height_m", "adapt_to_seat_height", "reference_state_init",
+                  "rsi_max_fraction", "rsi_zero_joint_speeds", "min_root_z", "max_episode_steps",
+                  "success_contact_s", "eval_episode_s", "max_seat_height_m"},
                  ctx);
   SitTaskConfig c;
   std::string variant = c.reward_variant;
@@ -49,6 +50,11 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "hold_energy_weight", c.hold_energy_weight, ctx);
   if (j.contains("energy")) c.energy = EnergyCostConfig::FromJson(j["energy"], ctx + ".energy");
   GetOptional(j, "pelvis_end_offset", c.pelvis_end_offset, ctx);
+  GetOptional(j, "clip_seat_height_m", c.clip_seat_height_m, ctx);
+  GetOptional(j, "adapt_to_seat_height", c.adapt_to_seat_height, ctx);
+  if (!(c.clip_seat_height_m > 0 && c.clip_seat_height_m < 1.0)) {
+    throw ConfigError(ctx + ".clip_seat_height_m: must be in (0, 1) m");
+  }
   GetOptional(j, "reference_state_init", c.reference_state_init, ctx);
   GetOptional(j, "rsi_max_fraction", c.rsi_max_fraction, ctx);
   GetOptional(j, "rsi_zero_joint_speeds", c.rsi_zero_joint_speeds, ctx);
@@ -85,6 +91,8 @@ Json SitTaskConfig::ToJson() const {
               {"hold_energy_weight", hold_energy_weight},
               {"energy", energy.ToJson()},
               {"pelvis_end_offset", pelvis_end_offset},
+              {"clip_seat_height_m", clip_seat_height_m},
+              {"adapt_to_seat_height", adapt_to_seat_height},
               {"reference_state_init", reference_state_init},
               {"rsi_max_fraction", rsi_max_fraction},
               {"rsi_zero_joint_speeds", rsi_zero_joint_speeds},
@@ -109,6 +117,11 @@ ClipPlacement SitTask::PlacementFor(const HumanoidChairEnv& env) const {
       seat + rz * Eigen::Vector3d(c_.pelvis_end_offset[0], c_.pelvis_end_offset[1], 0.0);
   const Eigen::Vector3d have = rz * pelvis_end_clip_;
   p.offset = Eigen::Vector3d(want.x() - have.x(), want.y() - have.y(), 0.0);
+  if (c_.adapt_to_seat_height && env.chair() != nullptr) {
+    p.descent_dz = env.chair()->seat_height() - c_.clip_seat_height_m;
+    p.z_top = root_top_z_;
+    p.z_bottom = root_bottom_z_;
+  }
   return p;
 }
 
@@ -121,6 +134,8 @@ bool SitTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState*
     const MotionPose& last = motion_.frame(motion_.num_frames() - 1);
     const FkResult fk = ForwardKinematics(env.model(), last.root_pos, last.root_rot, last.q.data());
     pelvis_end_clip_ = fk.body_world[env.model().pelvis_body()].translation();
+    root_top_z_ = motion_.frame(0).root_pos.z();
+    root_bottom_z_ = last.root_pos.z();
     pelvis_end_known_ = true;
   }
   m_.placement = PlacementFor(env);

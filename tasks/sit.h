@@ -28,6 +28,10 @@ struct SitTaskConfig {
   // Where the clip's last-frame pelvis lands, relative to the seat target, in the chair frame
   // (x forward from the seat, y to the chair's left) [m].
   std::array<double, 2> pelvis_end_offset{0.0, 0.0};
+  // The clip was placed for a seat top at this height (the authors' chair) [m]; on a seat of
+  // another height its descent is stretched so it ends seated on that seat (ClipPlacement).
+  double clip_seat_height_m = 0.4029;
+  bool adapt_to_seat_height = true;
   // Reference state initialisation (paper Sec. 6): start time ~ U(0, rsi_max_fraction x clip),
   // joint speeds zeroed (notes 4.3: s ~ U(0..82) of a 104-frame segment). Off: frame 0.
   bool reference_state_init = true;
@@ -74,6 +78,7 @@ class SitTask : public ClipTask {
   SitTaskConfig c_;
   SitTerms terms_;
   Eigen::Vector3d pelvis_end_clip_ = Eigen::Vector3d::Zero();  // clip frame [m]
+  double root_top_z_ = 0.0, root_bottom_z_ = 0.0;              // clip root heights [m]
   bool pelvis_end_known_ = false;
 };
 

@@ -37,12 +37,28 @@ void WalkTaskConfig::ApplyVariant(const std::string& variant, const std::string&
 WalkTaskConfig WalkTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
   CheckKnownKeys(j,
-                 {"reward_variant", "motion_file", "stage", "similarity", "root_vel_weight",
-                  "root_vel_alpha", "target_weight", "target_k", "min_root_z", "max_episode_steps",
-                  "reference_state_init", "target_redraw_s", "target_reach_m", "target_min_dist_m",
-                  "target_max_dist_m", "target_max_angle_deg", "target_turn_prob",
-                  "target_turn_max_angle_deg", "fall_restart_prob", "fall_restart_lead_s",
-                  "fall_restart_pool", "forward_target"},
+                 {"reward_variant",
+                  "motion_file",
+                  "stage",
+                  "similarity",
+                  "root_vel_weight",
+                  "root_vel_alpha",
+                  "target_weight",
+                  "target_k",
+                  "min_root_z",
+                  "max_episode_steps",
+                  "reference_state_init",
+                  "target_redraw_s",
+                  "target_reach_m",
+                  "target_min_dist_m",
+                  "target_max_dist_m",
+                  "target_max_angle_deg",
+                  "target_turn_prob",
+                  "target_turn_max_angle_deg",
+                  "fall_restart_prob",
+                  "fall_restart_lead_s",
+                  "fall_restart_pool",
+                  "forward_target"},
                  ctx);
   WalkTaskConfig c;
   std::string variant = c.reward_variant;
@@ -247,8 +263,8 @@ TaskStep WalkTask::OnStep(const HumanoidChairEnv& env, const float* /*action*/) 
   } else {
     const double d = TargetDistance(env);
     // After a re-draw the progress is reset: that step earns the sigmoid at V = 0 (notes 4.4).
-    t.goal =
-        TargetProgressReward(m_.redrawn ? d : m_.prev_distance, d, dt_, c_.target_weight, c_.target_k);
+    t.goal = TargetProgressReward(m_.redrawn ? d : m_.prev_distance, d, dt_, c_.target_weight,
+                                  c_.target_k);
     m_.prev_distance = d;
   }
   t.target_redrawn = m_.redrawn;

@@ -23,8 +23,8 @@ proto::ModelWeights LoadModelFile(const std::string& path);
 struct WalkEvalOptions {
   int episodes = 10;
   uint64_t seed = 0;
-  bool stochastic = false;         // default: the Gaussian's mean
-  double no_fall_s = 10.0;         // an episode counts as no-fall if it stays up this long [s]
+  bool stochastic = false;  // default: the Gaussian's mean
+  double no_fall_s = 10.0;  // an episode counts as no-fall if it stays up this long [s]
   FootSlidingOptions foot_sliding;
 };
 

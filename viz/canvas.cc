@@ -3,9 +3,11 @@
 #include <png.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
+#include <utility>
 
 namespace perch {
 
@@ -19,8 +21,7 @@ void Canvas::Set(int x, int y, Rgb c) {
   pixels_[static_cast<size_t>(y) * width_ + x] = c;
 }
 
-void Canvas::FillCapsule(const Eigen::Vector2d& a, const Eigen::Vector2d& b, double radius,
-                         Rgb c) {
+void Canvas::FillCapsule(const Eigen::Vector2d& a, const Eigen::Vector2d& b, double radius, Rgb c) {
   const int x0 = std::max(0, static_cast<int>(std::floor(std::min(a.x(), b.x()) - radius)));
   const int x1 = std::min(width_ - 1, static_cast<int>(std::ceil(std::max(a.x(), b.x()) + radius)));
   const int y0 = std::max(0, static_cast<int>(std::floor(std::min(a.y(), b.y()) - radius)));
@@ -76,7 +77,7 @@ void Canvas::FillConvexHull(const std::vector<Eigen::Vector2d>& points, Rgb c) {
       if ((u.y() <= yc && v.y() >= yc) || (v.y() <= yc && u.y() >= yc)) {
         const double dy = v.y() - u.y();
         const double x = std::abs(dy) < 1e-12 ? std::min(u.x(), v.x())
-                                               : u.x() + (yc - u.y()) / dy * (v.x() - u.x());
+                                              : u.x() + (yc - u.y()) / dy * (v.x() - u.x());
         const double x2 = std::abs(dy) < 1e-12 ? std::max(u.x(), v.x()) : x;
         xl = std::min(xl, std::min(x, x2));
         xr = std::max(xr, std::max(x, x2));
@@ -93,6 +94,43 @@ void Canvas::FillConvexHull(const std::vector<Eigen::Vector2d>& points, Rgb c) {
 void Canvas::FillRect(int x0, int y0, int x1, int y1, Rgb c) {
   for (int y = std::max(0, y0); y <= std::min(height_ - 1, y1); ++y)
     for (int x = std::max(0, x0); x <= std::min(width_ - 1, x1); ++x) Set(x, y, c);
+}
+
+namespace {
+
+// 3x5 glyphs, bit (row * 3 + col) set where the pixel is on.
+uint16_t Glyph(char ch) {
+  static const std::pair<char, uint16_t> kGlyphs[] = {
+      {'0', 0x7b6f}, {'1', 0x749a}, {'2', 0x73e7}, {'3', 0x79e7}, {'4', 0x49ed}, {'5', 0x79cf},
+      {'6', 0x7bcf}, {'7', 0x24a7}, {'8', 0x7bef}, {'9', 0x79ef}, {'.', 0x2000}, {':', 0x0410},
+      {'-', 0x01c0}, {'=', 0x0e38}, {' ', 0x0000}, {'%', 0x52a5}, {'/', 0x12a4}, {'(', 0x224a},
+      {')', 0x2922}, {'a', 0x6b70}, {'b', 0x3b59}, {'c', 0x6270}, {'d', 0x6b74}, {'e', 0x63d0},
+      {'f', 0x12ce}, {'g', 0x39ae}, {'h', 0x5b59}, {'i', 0x2482}, {'j', 0x2b04}, {'k', 0x5ae9},
+      {'l', 0x7493}, {'m', 0x5bf8}, {'n', 0x5b58}, {'o', 0x2b50}, {'p', 0x1758}, {'q', 0x4d70},
+      {'r', 0x1270}, {'s', 0x3cf0}, {'t', 0x64ba}, {'u', 0x6b68}, {'v', 0x2b68}, {'w', 0x7f68},
+      {'x', 0x54a8}, {'y', 0x39a8}, {'z', 0x7338},
+  };
+  for (const auto& [c, bits] : kGlyphs) {
+    if (c == ch) return bits;
+  }
+  return 0x7fff;  // unknown: a filled box
+}
+
+}  // namespace
+
+void Canvas::DrawText(int x, int y, const std::string& text, Rgb c, int scale) {
+  for (size_t i = 0; i < text.size(); ++i) {
+    const uint16_t g = Glyph(static_cast<char>(std::tolower(static_cast<unsigned char>(text[i]))));
+    const int gx = x + static_cast<int>(i) * 4 * scale;
+    for (int r = 0; r < 5; ++r) {
+      for (int col = 0; col < 3; ++col) {
+        if (g & (1u << (r * 3 + col))) {
+          FillRect(gx + col * scale, y + r * scale, gx + (col + 1) * scale - 1,
+                   y + (r + 1) * scale - 1, c);
+        }
+      }
+    }
+  }
 }
 
 void Canvas::Blit(const Canvas& other, int x, int y) {

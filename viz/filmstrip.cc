@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 namespace perch {
@@ -93,8 +94,8 @@ std::vector<PoseFrame> PickFrames(const std::vector<PoseFrame>& all, int count) 
   if (all.empty() || count <= 0) return out;
   if (count == 1 || all.size() == 1) return {all.front()};
   for (int i = 0; i < count; ++i) {
-    const size_t idx = static_cast<size_t>(
-        std::llround(static_cast<double>(i) * (all.size() - 1) / (count - 1)));
+    const size_t idx =
+        static_cast<size_t>(std::llround(static_cast<double>(i) * (all.size() - 1) / (count - 1)));
     out.push_back(all[idx]);
   }
   return out;
@@ -113,7 +114,8 @@ Canvas RenderFilmstrip(const HumanoidModel& model, const Chair* chair,
       Item it{};
       it.is_box = true;
       for (int c = 0; c < 8; ++c) {
-        const Eigen::Vector3d local((c & 1) ? b.max.x() : b.min.x(), (c & 2) ? b.max.y() : b.min.y(),
+        const Eigen::Vector3d local((c & 1) ? b.max.x() : b.min.x(),
+                                    (c & 2) ? b.max.y() : b.min.y(),
                                     (c & 4) ? b.max.z() : b.min.z());
         it.corners.push_back(chair_pose * local);
       }
@@ -137,13 +139,14 @@ Canvas RenderFilmstrip(const HumanoidModel& model, const Chair* chair,
   }
   // Following: a humanoid-sized window, so the gait stays readable on long episodes (the fixed
   // window is the overview of the whole path).
-  const double extent =
-      options.follow ? options.min_extent_m
-                     : std::max(options.min_extent_m, (hi - lo).maxCoeff() + 2.0 * options.margin_m);
+  const double extent = options.follow ? options.min_extent_m
+                                       : std::max(options.min_extent_m,
+                                                  (hi - lo).maxCoeff() + 2.0 * options.margin_m);
   const double scale = px / extent;
   const Eigen::Vector2d centre = 0.5 * (lo + hi);
 
-  Canvas strip(px * static_cast<int>(frames.size()), 2 * px + 1, kBackground);
+  constexpr int kCaption = 16;  // caption row under the panels [px]
+  Canvas strip(px * static_cast<int>(frames.size()), 2 * px + 1 + kCaption, kBackground);
   for (size_t k = 0; k < frames.size(); ++k) {
     const PoseFrame& f = frames[k];
     if (static_cast<int>(f.q.size()) != model.num_joints())
@@ -184,7 +187,16 @@ Canvas RenderFilmstrip(const HumanoidModel& model, const Chair* chair,
     DrawPanel(top_panel, tv, top, options.targets);
     strip.Blit(side_panel, static_cast<int>(k) * px, 0);
     strip.Blit(top_panel, static_cast<int>(k) * px, px + 1);
-    if (k > 0) strip.FillRect(static_cast<int>(k) * px, 0, static_cast<int>(k) * px, 2 * px, kSeparator);
+    char caption[64];
+    std::snprintf(caption, sizeof(caption), "%.2f s", f.time_s);
+    std::string text = caption;
+    if (!f.label.empty()) text += " " + f.label;
+    while (text.size() > 4 && Canvas::TextWidth(text) > px - 4) text.pop_back();
+    strip.DrawText(static_cast<int>(k) * px + 3, 2 * px + 4, text, Rgb{20, 20, 20});
+    if (k > 0) {
+      strip.FillRect(static_cast<int>(k) * px, 0, static_cast<int>(k) * px, 2 * px + kCaption,
+                     kSeparator);
+    }
   }
   strip.FillRect(0, px, strip.width() - 1, px, kSeparator);
   return strip;

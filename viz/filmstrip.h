@@ -1,5 +1,6 @@
 // Draws a few frames of an episode as a filmstrip PNG, side view (x right, z up) above top view
-// (x right, y up), with the humanoid's capsules, the chair's boxes and walk targets, so a person can
+// (x right, y up), a time stamp (and the frame's label) under each, with the humanoid's capsules,
+// the chair's boxes and walk targets, so a person can
 // see a gait or a sit without a 3D viewer. Pure C++ (FK from the model), no Bullet.
 #pragma once
 
@@ -19,6 +20,7 @@ struct PoseFrame {
   Eigen::Quaterniond root_quat = Eigen::Quaterniond::Identity();
   std::vector<double> q;  // [21] joint angles, observation order [rad]
   double time_s = 0.0;
+  std::string label;  // drawn after the time stamp (e.g. the active subtask); may be empty
 };
 
 struct FilmstripOptions {

@@ -1,11 +1,11 @@
 #include "envs/humanoid_env.h"
 
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+
 #include <cmath>
 #include <cstring>
 #include <fstream>
-#include <sys/stat.h>
-
-#include <gtest/gtest.h>
 
 #include "common/npz.h"
 #include "common/rng.h"
@@ -60,7 +60,8 @@ TEST(HumanoidEnv, StandingPoseHeldByPdFor10Seconds) {
     ASSERT_FALSE(r.terminated) << "fell at step " << t;
     ASSERT_FALSE(r.invalid);
     if (t > steps - 61) {
-      max_speed_last_second = std::max(max_speed_last_second, env.humanoid_state().root_lin_vel.norm());
+      max_speed_last_second =
+          std::max(max_speed_last_second, env.humanoid_state().root_lin_vel.norm());
     }
   }
   EXPECT_GT(env.humanoid_state().root_pos.z(), 1.2);
@@ -162,7 +163,8 @@ TEST(HumanoidEnv, ObservationInvariantToHorizontalSceneTransform) {
     a.stand.walk_target = {2.0, 1.0};
     EnvConfig b = a;
     b.chair_placement = ChairPlacement{dx, dy, yaw};
-    const Eigen::Vector3d t = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * Eigen::Vector3d(2.0, 1.0, 0.0);
+    const Eigen::Vector3d t =
+        Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * Eigen::Vector3d(2.0, 1.0, 0.0);
     b.stand.walk_target = {t.x() + dx, t.y() + dy};
     HumanoidChairEnv ea(a), eb(b);
     std::vector<float> oa(ea.spec().obs_dim), ob(eb.spec().obs_dim), act(21);
@@ -190,7 +192,8 @@ TEST(HumanoidEnv, ObservationInvariantToHorizontalSceneTransform) {
       ea.Step(hold.data(), oa.data());
       eb.Step(hold.data(), ob.data());
     }
-    for (size_t i = 0; i < oa.size(); ++i) EXPECT_NEAR(oa[i], ob[i], 0.02) << "step 10, index " << i;
+    for (size_t i = 0; i < oa.size(); ++i)
+      EXPECT_NEAR(oa[i], ob[i], 0.02) << "step 10, index " << i;
     // In the air (no contacts) the agreement stays at rounding level.
     HumanoidState air = s;
     air.root_pos.z() += 1.0;
@@ -232,7 +235,8 @@ TEST(HumanoidEnv, DeterministicForSeedAndActions) {
     const auto other = Trajectory(6, 80, c);
     ASSERT_EQ(a.size(), b.size());
     for (size_t t = 0; t < a.size(); ++t) {
-      ASSERT_EQ(0, std::memcmp(a[t].data(), b[t].data(), a[t].size() * sizeof(float))) << "step " << t;
+      ASSERT_EQ(0, std::memcmp(a[t].data(), b[t].data(), a[t].size() * sizeof(float)))
+          << "step " << t;
     }
     EXPECT_NE(0, std::memcmp(a[0].data(), other[0].data(), a[0].size() * sizeof(float)));
   }
@@ -245,7 +249,8 @@ std::vector<std::vector<float>> RunSteps(HumanoidChairEnv& env, Rng& rng, int n)
   std::vector<std::vector<float>> out;
   for (int t = 0; t < n; ++t) {
     std::vector<float> a = act;
-    for (float& x : a) x = std::clamp(x + static_cast<float>(rng.Uniform(-0.05, 0.05)), -1.0f, 1.0f);
+    for (float& x : a)
+      x = std::clamp(x + static_cast<float>(rng.Uniform(-0.05, 0.05)), -1.0f, 1.0f);
     env.Step(a.data(), obs.data());
     out.push_back(obs);
   }
@@ -275,7 +280,8 @@ TEST(HumanoidEnv, SavedStateContinuesIdentically) {
   const auto restored_other = RunSteps(other, rng, 20);
   for (int t = 0; t < 20; ++t) {
     // Any restore of a state gives the same future, bit for bit, in any env instance.
-    ASSERT_EQ(0, std::memcmp(restored_same[t].data(), restored_other[t].data(), obs.size() * sizeof(float)))
+    ASSERT_EQ(0, std::memcmp(restored_same[t].data(), restored_other[t].data(),
+                             obs.size() * sizeof(float)))
         << "step " << t;
     // Bullet's contact caches (warm-start impulses, manifold points) are not part of the state.
     // With many redundant seat contacts the solver's impulse split, hence the joint speeds, can
@@ -307,7 +313,8 @@ TEST(HumanoidEnv, SavedStateInTheAirContinuesToRoundingLevel) {
   rng.SetState(rng_saved);
   const auto restored = RunSteps(env, rng, 10);
   for (int t = 0; t < 10; ++t) {
-    for (size_t i = 0; i < obs.size(); ++i) EXPECT_NEAR(restored[t][i], original[t][i], 1e-4) << t << "," << i;
+    for (size_t i = 0; i < obs.size(); ++i)
+      EXPECT_NEAR(restored[t][i], original[t][i], 1e-4) << t << "," << i;
   }
 }
 
@@ -443,12 +450,14 @@ TEST(Spawn, ZonesFollowTheirGeometry) {
 
 TEST(HumanoidEnv, MalformedChairAndConfigNameFileAndField) {
   const std::string bad_chair = ::testing::TempDir() + "bad_chair.json";
-  std::ofstream(bad_chair) << R"({"name": "x", "boxes": [{"role": "seat", "min": [0, 0, 0], "max": [1, 1]}]})";
+  std::ofstream(bad_chair)
+      << R"({"name": "x", "boxes": [{"role": "seat", "min": [0, 0, 0], "max": [1, 1]}]})";
   try {
     Chair::Load(bad_chair);
     FAIL();
   } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find(bad_chair + ".boxes[0].max"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(bad_chair + ".boxes[0].max"), std::string::npos)
+        << e.what();
   }
   const std::string bad_param = ::testing::TempDir() + "bad_param.json";
   std::ofstream(bad_param) << R"({"name": "x", "parametric": {"seat_height": 0.4, "legs": 3}})";
@@ -456,14 +465,16 @@ TEST(HumanoidEnv, MalformedChairAndConfigNameFileAndField) {
     Chair::Load(bad_param);
     FAIL();
   } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find(bad_param + ".parametric: unknown field 'legs'"), std::string::npos)
+    EXPECT_NE(std::string(e.what()).find(bad_param + ".parametric: unknown field 'legs'"),
+              std::string::npos)
         << e.what();
   }
   try {
     EnvConfig::FromJson(Json{{"physics", {{"substeps", "four"}}}}, "run.json");
     FAIL();
   } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find("run.json.physics.substeps"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("run.json.physics.substeps"), std::string::npos)
+        << e.what();
   }
   try {
     EnvConfig::FromJson(Json{{"action_mode", "velocity"}}, "run.json");
@@ -517,7 +528,8 @@ TEST(HumanoidEnv, JointNormalisationMatchesAuthorsObsArrays) {
   for (int64_t r = 0; r < rows; r += 97) {
     env.ResetFromQpos(qpos.values.data() + 51 * r, obs.data());
     for (int k = 0; k < 42; ++k) {
-      EXPECT_NEAR(obs[kJoints + k], ref.values[52 * r + 8 + k], 2e-4) << "row " << r << " col " << 8 + k;
+      EXPECT_NEAR(obs[kJoints + k], ref.values[52 * r + 8 + k], 2e-4)
+          << "row " << r << " col " << 8 + k;
     }
     // Root height, roll and pitch also match (columns 0, 6, 7).
     EXPECT_NEAR(obs[0], ref.values[52 * r + 0], 1e-4);
@@ -551,6 +563,73 @@ TEST(HumanoidEnv, Zone1StartsFromTheAuthorsWalkFrame) {
     const Eigen::Vector2d to_center = Eigen::Vector2d(0.45 - p.x(), -p.y()).normalized();
     EXPECT_GT(v.normalized().dot(to_center), 0.9);
   }
+}
+
+}  // namespace
+}  // namespace perch
+
+namespace perch {
+namespace {
+
+TEST(HumanoidEnv, RandomChairsPerEpisodeWithinTheirRangesAndTheSeatTargetFollows) {
+  EnvConfig c;
+  c.chair = "authors";
+  c.chair_random.prob = 1.0;
+  HumanoidChairEnv env(c);
+  std::vector<float> obs(env.spec().obs_dim);
+  double lo = 1e9, hi = -1e9;
+  int backs = 0;
+  for (int seed = 0; seed < 12; ++seed) {
+    env.Seed(seed);
+    env.Reset(obs.data());
+    const Chair* chair = env.chair();
+    ASSERT_NE(chair, nullptr);
+    EXPECT_EQ(chair->name, "random");
+    EXPECT_EQ(env.world().chair(), chair);  // the world built this episode with it
+    const double h = chair->seat_height();
+    EXPECT_GE(h, c.chair_random.seat_height[0]);
+    EXPECT_LE(h, c.chair_random.seat_height[1]);
+    EXPECT_NEAR(env.SeatTargetWorld().z(), h, 1e-9);  // parametric target: seat top centre
+    lo = std::min(lo, h);
+    hi = std::max(hi, h);
+    for (const ChairBox& b : chair->boxes) backs += b.role == "backrest";
+  }
+  EXPECT_GT(hi - lo, 0.05);
+  EXPECT_GT(backs, 0);
+  EXPECT_LT(backs, 12);  // with and without backrest
+  // prob 0: the configured chair every episode.
+  c.chair_random.prob = 0.0;
+  HumanoidChairEnv fixed(c);
+  fixed.Reset(obs.data());
+  EXPECT_NEAR(fixed.chair()->seat_height(), 0.4029, 1e-9);
+}
+
+TEST(HumanoidEnv, SeatContactHeightFollowsTheSeatUnlessAbsolute) {
+  EnvConfig c;
+  c.chair = "authors";
+  EXPECT_NEAR(HumanoidChairEnv(c).SeatContactMaxPelvisZ(), 0.54, 1e-12);  // the authors' rule
+  c.chair = "high";                                                       // seat top 0.52 m
+  EXPECT_NEAR(HumanoidChairEnv(c).SeatContactMaxPelvisZ(), 0.54 + 0.52 - 0.4029, 1e-12);
+  c.seat_contact_relative = false;
+  EXPECT_NEAR(HumanoidChairEnv(c).SeatContactMaxPelvisZ(), 0.54, 1e-12);
+}
+
+TEST(HumanoidEnv, ChairRandomConfigErrorsNameTheField) {
+  auto err = [](const Json& j) {
+    try {
+      EnvConfig::FromJson(j, "e.json");
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_NE(err({{"chair_random", {{"prob", 2.0}}}}).find("e.json.chair_random.prob"),
+            std::string::npos);
+  EXPECT_NE(err({{"chair_random", {{"seat_height", {0.5, 0.3}}}}}).find("seat_height"),
+            std::string::npos);
+  EXPECT_NE(err({{"chair_random", {{"seat_hieght", {0.3, 0.5}}}}}).find("seat_hieght"),
+            std::string::npos);
+  EXPECT_EQ(err({{"chair_random", {{"prob", 0.5}}}}), "");
 }
 
 }  // namespace

@@ -140,3 +140,28 @@ TEST(SitTask, ChairsItCannotUseAreRefusedByField) {
 
 }  // namespace
 }  // namespace perch
+
+namespace perch {
+namespace {
+
+TEST(SitTask, OnAnotherSeatHeightTheDescentEndsOnThatSeatAndTheStartStaysOnTheFloor) {
+  std::vector<float> obs(57);
+  auto ref = [&](const char* chair, bool adapt, int step) {
+    auto env = MakeSitEnv(Json{{"reference_state_init", false}, {"adapt_to_seat_height", adapt}},
+                          Json{{"chair", chair}});
+    env->Seed(1);
+    env->Reset(obs.data());
+    const SitTask& t = TaskOf(*env);
+    return t.ReferenceAt(step < 0 ? t.ClipEndStep() + 5 : step);
+  };
+  const double authors_end = ref("authors", true, -1).root_pos.z();
+  const double high_end = ref("high", true, -1).root_pos.z();
+  const double low_end = ref("low", true, -1).root_pos.z();
+  EXPECT_NEAR(high_end - authors_end, 0.52 - 0.4029, 1e-6);
+  EXPECT_NEAR(low_end - authors_end, 0.33 - 0.4029, 1e-6);
+  EXPECT_NEAR(ref("high", true, 0).root_pos.z(), ref("authors", true, 0).root_pos.z(), 1e-9);
+  EXPECT_NEAR(ref("high", false, -1).root_pos.z(), authors_end, 1e-9);  // adaptation off
+}
+
+}  // namespace
+}  // namespace perch

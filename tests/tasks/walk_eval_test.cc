@@ -274,7 +274,7 @@ TEST(EvalCommand, JsonAndFilmstripOfTheRightSize) {
   EXPECT_EQ(j["config"]["walk"]["stage"], "target");
   const Canvas c = Canvas::LoadPng(png);
   EXPECT_EQ(c.width(), 4 * 100);
-  EXPECT_EQ(c.height(), 2 * 100 + 1);
+  EXPECT_EQ(c.height(), 2 * 100 + 1 + 16);  // with the caption row
 
   const std::string bad = Write("walk_cli_bad.bin", "garbage");
   RunPerch("eval --task walk --model " + bad + " --json", &rc, &err);

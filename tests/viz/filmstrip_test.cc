@@ -1,9 +1,9 @@
 #include "viz/filmstrip.h"
 
+#include <gtest/gtest.h>
+
 #include <cstdio>
 #include <string>
-
-#include <gtest/gtest.h>
 
 namespace perch {
 namespace {
@@ -43,7 +43,7 @@ TEST(Filmstrip, StandingHumanoidIsDrawnWhereFkPutsIt) {
   const Canvas c =
       RenderFilmstrip(model, nullptr, Eigen::Isometry3d::Identity(), {Standing(0, 0)}, opt);
   ASSERT_EQ(c.width(), 200);
-  ASSERT_EQ(c.height(), 401);
+  ASSERT_EQ(c.height(), 401 + 16);  // two panels, a separator and the caption row
   const Mapper m{200 / 2.0, 0.0, 0.35 * 2.0, 0.0, 200};
   // The head sphere (torso frame z = 0.19, r = 0.09) is torso-coloured in the side view...
   const Eigen::Vector2i head = m.Side(0, 0.03, 1.285 + 0.19);
@@ -112,6 +112,38 @@ TEST(Filmstrip, FollowingKeepsTheHumanoidLargeOnLongPaths) {
   }
   // And at the default 2.2 m window the torso covers a visible area (not a few pixels).
   EXPECT_GT(torso, 40);
+}
+
+TEST(Filmstrip, EachFrameIsCaptionedWithItsTimeAndLabel) {
+  const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
+  FilmstripOptions opt;
+  opt.panel_px = 150;
+  PoseFrame a = Standing(0, 0), b = Standing(0, 0);
+  a.time_s = 0.0;
+  b.time_s = 1.25;
+  b.label = "sit";
+  const Canvas c = RenderFilmstrip(model, nullptr, Eigen::Isometry3d::Identity(), {a, b}, opt);
+  ASSERT_EQ(c.height(), 2 * 150 + 1 + 16);
+  // The caption row of each panel against the text drawn alone.
+  auto caption_ink = [&](int panel) {
+    int ink = 0;
+    for (int y = 301; y < c.height(); ++y)
+      for (int x = panel * 150 + 1; x < (panel + 1) * 150; ++x)
+        ink += c.at(x, y) == Rgb{20, 20, 20};
+    return ink;
+  };
+  auto ink_of = [](const std::string& text) {
+    Canvas t(200, 20, Rgb{255, 255, 255});
+    t.DrawText(0, 0, text, Rgb{20, 20, 20});
+    int ink = 0;
+    for (int y = 0; y < 20; ++y)
+      for (int x = 0; x < 200; ++x) ink += t.at(x, y) == Rgb{20, 20, 20};
+    return ink;
+  };
+  EXPECT_EQ(caption_ink(0), ink_of("0.00 s"));
+  EXPECT_EQ(caption_ink(1), ink_of("1.25 s sit"));
+  EXPECT_NE(ink_of("1"), ink_of("8"));  // glyphs differ
+  EXPECT_EQ(Canvas::TextWidth("abc", 2), 3 * 8 - 2);
 }
 
 TEST(Canvas, PngRoundTripAndFailedSaveLeavesNothing) {
