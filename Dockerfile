@@ -9,7 +9,7 @@ RUN cmake -S . -B build -DCMAKE_BUILD_TYPE=Release && cmake --build build -j"$(n
 
 FROM debian:12
 RUN apt-get update -qq && apt-get install -y -qq --no-install-recommends \
-      libbullet3.24 libzmq5 libprotobuf32 libspdlog1.10 libfmt9 libpng16-16 \
+      libbullet3.24 libzmq5 libprotobuf32 libspdlog1.10 libfmt9 libpng16-16 libssl3 \
     && rm -rf /var/lib/apt/lists/*
 COPY --from=build /src/build/app/perch /usr/local/bin/perch
 COPY --from=build /src/data /opt/perch/data

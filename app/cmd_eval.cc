@@ -1,11 +1,14 @@
 // perch eval: evaluates a trained subtask policy (any registered task) over seeded episodes,
 // optionally drawing a filmstrip; perch train-local: bounded in-process PPO on a task env (no
 // cluster), for comparisons.
+#include <algorithm>
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "app/commands.h"
@@ -14,6 +17,7 @@
 #include "learner/service/checkpoint.h"
 #include "tasks/local_train.h"
 #include "tasks/registry.h"
+#include "tasks/state_bank.h"
 #include "tasks/task_env.h"
 #include "tasks/task_eval.h"
 #include "tasks/walk_eval.h"
@@ -27,7 +31,8 @@ struct ConfigOverrides {
   std::string task;         // empty: the config's task
   std::string config_path;  // empty: the model's saved config, else the task's defaults
   std::string stage, variant, action_mode, chair;
-  std::string start;  // "fixed" or "reference"
+  std::string start;               // "fixed", "reference" or "end-poses"
+  std::vector<std::string> banks;  // --start end-poses: the start-state banks
   double target_turn_prob = -1.0;
 };
 
@@ -117,6 +122,18 @@ TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_p
     // Evaluation starts from the clip's first frame (Table 4), unless asked otherwise.
     sec["reference_state_init"] = o.start == "reference";
   }
+  if (o.start == "end-poses") {
+    if (o.banks.empty()) throw ConfigError("--start end-poses: needs --bank FILE");
+    if (task != "turn_left" && task != "turn_right" && task != "sit") {
+      throw ConfigError("--start end-poses: only for turn_left, turn_right and sit");
+    }
+    sec["start"] = {{"banks", o.banks}, {"prob", 1.0}};
+  } else if (!o.banks.empty()) {
+    throw ConfigError("--bank: only with --start end-poses");
+  } else if (task != "walk" && task != "stand" && sec.contains("start")) {
+    // A fine-tuned policy is evaluated from its clip's first frame unless asked otherwise.
+    sec["start"]["prob"] = 0.0;
+  }
   if (!o.variant.empty()) {
     // The preset replaces the reward fields, so drop them before re-reading.
     for (const char* k : {"similarity", "root_vel_weight", "root_vel_alpha", "target_weight",
@@ -169,8 +186,12 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "JSON file, or all (every preset, one result each)");
   cmd->add_option("--start", o->cfg.start,
                   "episode start override: fixed (the config's initial pose / the clip's first "
-                  "frame) or reference (a random phase of the reference motion)")
-      ->check(CLI::IsMember({"fixed", "reference"}));
+                  "frame), reference (a random phase of the reference motion) or end-poses "
+                  "(states of --bank, e.g. walk end poses for a turn)")
+      ->check(CLI::IsMember({"fixed", "reference", "end-poses"}));
+  cmd->add_option("--bank", o->cfg.banks,
+                  "start-state bank(s) for --start end-poses (perch sample-end-poses); several: "
+                  "their union");
   cmd->add_option("--stage", o->cfg.stage, "walk stage override")
       ->check(CLI::IsMember({"forward", "target"}));
   cmd->add_option("--reward-variant", o->cfg.variant, "reward preset override")
@@ -255,6 +276,83 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                 << ", success_rate " << result["success_rate"] << " (95% "
                 << result["success_ci95"].dump() << "), fall_rate " << result["fall_rate"]
                 << ", mean_imitation_reward " << result["mean_imitation_reward"] << "\n";
+    }
+  });
+
+  struct SampleOpts {
+    ConfigOverrides cfg;
+    std::string model, out;
+    SampleEndPosesOptions sample;
+    bool deterministic = false, overwrite = false, json = false;
+  };
+  auto so = std::make_shared<SampleOpts>();
+  so->sample.workers = std::max(1u, std::thread::hardware_concurrency());
+  CLI::App* sp = root.add_subcommand(
+      "sample-end-poses",
+      "Run a trained subtask policy and keep the full state after N steps of every episode that "
+      "survives N + K steps: a start-state bank for transition fine-tuning (notes 4.5)");
+  sp->add_option("--model", so->model, "policy (checkpoint, run dir or ModelWeights)")->required();
+  sp->add_option("--task", so->cfg.task, "task of the policy (default: the model's saved config)")
+      ->check(CLI::IsMember(EvalTaskNames()));
+  sp->add_option("--config", so->cfg.config_path, "task env config (default: the model's)");
+  sp->add_option("--steps", so->sample.steps, "N: control steps before the kept state")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100000));
+  sp->add_option("--survive", so->sample.survive, "K: further steps the episode must survive")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 100000));
+  sp->add_option("--count", so->sample.count, "C: states to collect")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 10000000));
+  sp->add_option("--seed", so->sample.seed, "episode seed (episode e as perch eval's)")
+      ->capture_default_str();
+  sp->add_option("--workers", so->sample.workers, "threads (default: all cores)")
+      ->check(CLI::Range(1, 1024));
+  sp->add_flag("--mean-actions", so->deterministic,
+               "the Gaussian's mean instead of sampled actions (the authors sample)");
+  sp->add_option("--out", so->out, "bank file to write (refuses to overwrite)")->required();
+  sp->add_flag("--overwrite", so->overwrite, "replace an existing --out");
+  sp->add_flag("--json", so->json, "print one JSON summary on stdout");
+  sp->callback([so]() {
+    if (!so->overwrite && std::filesystem::exists(so->out)) {
+      throw ConfigError(so->out + ": exists; not overwritten (--overwrite replaces it)");
+    }
+    ConfigOverrides co = so->cfg;
+    TaskEnvConfig config = ResolveConfig(co, so->model);
+    const std::string model_file = ModelFile(so->model);
+    const proto::ModelWeights weights = LoadModelFile(model_file);
+    so->sample.stochastic = !so->deterministic;
+    const auto t0 = std::chrono::steady_clock::now();
+    so->sample.progress = [&](int collected, int64_t episodes) {
+      const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      std::cerr << "sample-end-poses: " << collected << "/" << so->sample.count << " states, "
+                << episodes << " episodes, " << static_cast<int>(s) << " s\n";
+    };
+    proto::StateBank bank = SampleEndPoses(config, weights, so->sample);
+    bank.set_model_path(model_file);
+    bank.set_model_sha256(FileSha256(model_file));
+    WriteStateBank(so->out, bank, so->overwrite);
+    const double secs =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    Json summary{{"out", so->out},
+                 {"task", bank.task()},
+                 {"model", model_file},
+                 {"model_sha256", bank.model_sha256()},
+                 {"states", bank.states_size()},
+                 {"episodes_run", bank.episodes_run()},
+                 {"survival_rate", static_cast<double>(bank.states_size()) /
+                                       std::max<int64_t>(1, bank.episodes_run())},
+                 {"steps", bank.steps()},
+                 {"survive", bank.survive()},
+                 {"seed", bank.seed()},
+                 {"stochastic", bank.stochastic()},
+                 {"workers", so->sample.workers},
+                 {"seconds", secs}};
+    if (so->json) {
+      std::cout << summary.dump() << "\n";
+    } else {
+      std::cout << "wrote " << so->out << ": " << bank.states_size() << " states from "
+                << bank.episodes_run() << " episodes\n";
     }
   });
 

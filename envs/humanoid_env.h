@@ -43,6 +43,10 @@ class Task {
   virtual void BeforeObservation(HumanoidChairEnv& env, Rng& rng) {}
   // After the physics of one control step; `action` is the raw (unclipped) policy action.
   virtual TaskStep OnStep(const HumanoidChairEnv& env, const float* action) = 0;
+  // The task's per-episode memory as JSON, and back (start-state banks): with the env's EnvState
+  // it continues an episode from a saved point. Tasks without memory keep the defaults.
+  virtual Json SaveMemory() const { return Json::object(); }
+  virtual void LoadMemory(const Json& memory) {}
 };
 
 std::unique_ptr<Task> MakeTask(const EnvConfig& config);

@@ -13,6 +13,7 @@ PACKAGES=(
   nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libpng-dev zlib1g-dev
+  libssl-dev
   iproute2 procps
 )
 

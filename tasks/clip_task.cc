@@ -35,6 +35,17 @@ double EnergyCost(const EnergyCostConfig& c, const HumanoidChairEnv& env, const 
   return -c.speed_weight * power / n - c.action_weight * a2 / n;
 }
 
+BankStartConfig BankStartConfig::FromJson(const Json& j, const std::string& ctx) {
+  CheckKnownKeys(j, {"banks", "prob"}, ctx);
+  BankStartConfig c;
+  GetOptional(j, "banks", c.banks, ctx);
+  GetOptional(j, "prob", c.prob, ctx);
+  if (!(c.prob >= 0 && c.prob <= 1)) throw ConfigError(ctx + ".prob: must be in [0, 1]");
+  return c;
+}
+
+Json BankStartConfig::ToJson() const { return Json{{"banks", banks}, {"prob", prob}}; }
+
 MotionPose ClipPlacement::Apply(const MotionPose& p) const {
   const Eigen::AngleAxisd rz(yaw, Eigen::Vector3d::UnitZ());
   MotionPose out = p;
@@ -123,6 +134,58 @@ void ClipTask::RootVelocities(bool fd, const HumanoidChairEnv& env, int k, Eigen
     *v = s.root_lin_vel;
     *v_ref = ref.root_vel;
   }
+}
+
+bool ClipTask::BankStart(const BankStartConfig& c, const HumanoidChairEnv& env, Rng& rng,
+                         double yaw, const Eigen::Vector2d& xy, HumanoidState* s) {
+  from_bank_ = false;
+  if (c.banks.empty()) return false;
+  // The coin first, so the draws do not depend on whether the bank is loaded.
+  if (!(rng.Uniform(0.0, 1.0) < c.prob)) return false;
+  if (!bank_) bank_ = LoadStartBanks(c.banks, env.model());
+  const proto::BankState& b = bank_->states[rng.UniformInt(bank_->states.size())];
+  HumanoidState h = HumanoidStateOf(b);
+  const double turn = yaw - RpyFromQuat(h.root_quat).z();
+  const Eigen::AngleAxisd rz(turn, Eigen::Vector3d::UnitZ());
+  h.root_quat = (Eigen::Quaterniond(rz) * h.root_quat).normalized();
+  h.root_lin_vel = rz * h.root_lin_vel;
+  h.root_ang_vel = rz * h.root_ang_vel;
+  h.root_pos.x() = xy.x();
+  h.root_pos.y() = xy.y();
+  *s = h;
+  from_bank_ = true;
+  return true;
+}
+
+Json ClipTask::SaveMemory() const {
+  const ClipPlacement& p = m_.placement;
+  return Json{{"yaw", p.yaw},
+              {"offset", {p.offset.x(), p.offset.y(), p.offset.z()}},
+              {"descent_dz", p.descent_dz},
+              {"z_top", p.z_top},
+              {"z_bottom", p.z_bottom},
+              {"t0", m_.t0},
+              {"prev_q", m_.prev_q},
+              {"prev_root", {m_.prev_root.x(), m_.prev_root.y(), m_.prev_root.z()}},
+              {"prev_distance", m_.prev_distance}};
+}
+
+void ClipTask::LoadMemory(const Json& j) {
+  const std::string ctx = std::string(name()) + " task memory";
+  Memory m;
+  std::array<double, 3> offset{}, prev_root{};
+  GetRequired(j, "yaw", m.placement.yaw, ctx);
+  GetRequired(j, "offset", offset, ctx);
+  GetRequired(j, "descent_dz", m.placement.descent_dz, ctx);
+  GetRequired(j, "z_top", m.placement.z_top, ctx);
+  GetRequired(j, "z_bottom", m.placement.z_bottom, ctx);
+  GetRequired(j, "t0", m.t0, ctx);
+  GetRequired(j, "prev_q", m.prev_q, ctx);
+  GetRequired(j, "prev_root", prev_root, ctx);
+  GetRequired(j, "prev_distance", m.prev_distance, ctx);
+  m.placement.offset = Eigen::Vector3d(offset[0], offset[1], offset[2]);
+  m.prev_root = Eigen::Vector3d(prev_root[0], prev_root[1], prev_root[2]);
+  m_ = m;
 }
 
 void ClipTask::RememberPose(const HumanoidChairEnv& env) {

@@ -14,6 +14,7 @@
 #include "envs/humanoid_env.h"
 #include "motion/reference_motion.h"
 #include "tasks/imitation.h"
+#include "tasks/state_bank.h"
 
 namespace perch {
 
@@ -40,6 +41,15 @@ struct ClipPlacement {
   MotionPose Apply(const MotionPose& p) const;
 };
 
+// Episode starts from a start-state bank (transition fine-tuning, notes 4.3 "*_from_*"): with
+// probability `prob` an episode starts from a random bank state instead of the clip.
+struct BankStartConfig {
+  std::vector<std::string> banks;  // bank files (their union); empty: never
+  double prob = 1.0;
+  static BankStartConfig FromJson(const Json& j, const std::string& ctx);
+  Json ToJson() const;
+};
+
 class ClipTask : public Task {
  public:
   // Per-episode memory; with the env's EnvState it continues an episode from any point.
@@ -61,7 +71,10 @@ class ClipTask : public Task {
   bool ClipEnded(int step) const { return step >= ClipEndStep(); }
   const Memory& GetMemory() const { return m_; }
   void SetMemory(const Memory& m) { m_ = m; }
+  Json SaveMemory() const override;
+  void LoadMemory(const Json& memory) override;
   double start_time() const { return m_.t0; }
+  bool started_from_bank() const { return from_bank_; }  // this episode
 
  protected:
   // The env state of the reference at time t0 under `placement` (joint speeds zeroed if asked).
@@ -77,10 +90,17 @@ class ClipTask : public Task {
   void RootVelocities(bool finite_difference, const HumanoidChairEnv& env, int step,
                       Eigen::Vector3d* v, Eigen::Vector3d* v_ref) const;
   void RememberPose(const HumanoidChairEnv& env);  // end of every step and at reset
+  // A bank state with its yaw set to `yaw` and its root moved to `xy` (height, joints and
+  // velocities as sampled; velocities rotated with the yaw), or false when this episode starts
+  // from the clip (no bank, or the coin said so). Loads the banks at the first call.
+  bool BankStart(const BankStartConfig& c, const HumanoidChairEnv& env, Rng& rng, double yaw,
+                 const Eigen::Vector2d& xy, HumanoidState* s);
 
   ReferenceMotion motion_;
   double dt_;
   Memory m_;
+  std::shared_ptr<const StartBank> bank_;
+  bool from_bank_ = false;
 };
 
 }  // namespace perch

@@ -1,7 +1,9 @@
 #include "tasks/registry.h"
 
+#include "common/paths.h"
 #include "envs/chair.h"
 #include "tasks/sit.h"
+#include "tasks/state_bank.h"
 #include "tasks/task_env.h"
 #include "tasks/task_eval.h"
 #include "tasks/turn.h"
@@ -9,6 +11,19 @@
 
 namespace perch {
 namespace {
+
+// Every start bank of a task config reads and fits the humanoid (ConfigError naming the field).
+void CheckBanks(const BankStartConfig& start, const TaskEnvConfig& c, const std::string& ctx) {
+  if (start.banks.empty()) return;
+  const HumanoidModel model = HumanoidModel::Load(c.env.HumanoidPath());
+  for (const std::string& b : start.banks) {
+    try {
+      ReadStateBank(ResolveProjectPath(b), &model);
+    } catch (const ConfigError& e) {
+      throw ConfigError(ctx + ".start.banks: " + e.what());
+    }
+  }
+}
 
 TaskDef WalkDef() {
   TaskDef d;
@@ -56,6 +71,9 @@ TaskDef TurnDef(const std::string& name) {
         TurnTaskConfig::FromJson(j != nullptr ? *j : Json::object(), ctx, name));
   };
   d.write = [](const TaskEnvConfig& c) { return c.Section<TurnTaskConfig>().ToJson(); };
+  d.check = [name](const TaskEnvConfig& c, const std::string& ctx) {
+    CheckBanks(c.Section<TurnTaskConfig>().start, c, ctx + "." + name);
+  };
   d.make = [name](const TaskEnvConfig& c) -> std::unique_ptr<Task> {
     return std::make_unique<TurnTask>(name, c.Section<TurnTaskConfig>(), c.control_dt());
   };
@@ -81,6 +99,7 @@ TaskDef SitDef() {
   };
   d.write = [](const TaskEnvConfig& c) { return c.Section<SitTaskConfig>().ToJson(); };
   d.check = [](const TaskEnvConfig& c, const std::string& ctx) {
+    CheckBanks(c.Section<SitTaskConfig>().start, c, ctx + ".sit");
     const Chair chair = Chair::Load(c.env.ChairPath());
     const double limit = c.Section<SitTaskConfig>().max_seat_height_m;
     if (chair.seat_height() > limit) {

@@ -28,13 +28,15 @@ void SitTaskConfig::ApplyVariant(const std::string& variant, const std::string& 
 
 SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(j,
-                 {"reward_variant", "motion_file", "similarity", "approach_weight", "hold_phase",
-                  "hold_pose_weight", "hold_energy_weight", "energy", "pelvis_end_offset",
-                  "clip_seat_height_m", "adapt_to_seat_height", "reference_state_init",
-                  "rsi_max_fraction", "rsi_zero_joint_speeds", "min_root_z", "max_episode_steps",
-                  "success_contact_s", "eval_episode_s", "max_seat_height_m"},
-                 ctx);
+  CheckKnownKeys(
+      j,
+      {"reward_variant",    "motion_file",           "similarity",           "approach_weight",
+       "hold_phase",        "hold_pose_weight",      "hold_energy_weight",   "energy",
+       "pelvis_end_offset", "clip_seat_height_m",    "adapt_to_seat_height", "reference_state_init",
+       "rsi_max_fraction",  "rsi_zero_joint_speeds", "min_root_z",           "max_episode_steps",
+       "success_contact_s", "eval_episode_s",        "max_seat_height_m",    "start",
+       "start_noise_m",     "start_noise_deg"},
+      ctx);
   SitTaskConfig c;
   std::string variant = c.reward_variant;
   GetOptional(j, "reward_variant", variant, ctx);
@@ -63,6 +65,12 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "success_contact_s", c.success_contact_s, ctx);
   GetOptional(j, "eval_episode_s", c.eval_episode_s, ctx);
   GetOptional(j, "max_seat_height_m", c.max_seat_height_m, ctx);
+  if (j.contains("start")) c.start = BankStartConfig::FromJson(j["start"], ctx + ".start");
+  GetOptional(j, "start_noise_m", c.start_noise_m, ctx);
+  GetOptional(j, "start_noise_deg", c.start_noise_deg, ctx);
+  if (!(c.start_noise_m[0] >= 0 && c.start_noise_m[1] >= 0 && c.start_noise_deg >= 0)) {
+    throw ConfigError(ctx + ".start_noise_m/start_noise_deg: must be >= 0");
+  }
   if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
   if (!(c.rsi_max_fraction >= 0 && c.rsi_max_fraction <= 1)) {
     throw ConfigError(ctx + ".rsi_max_fraction: must be in [0, 1]");
@@ -100,7 +108,10 @@ Json SitTaskConfig::ToJson() const {
               {"max_episode_steps", max_episode_steps},
               {"success_contact_s", success_contact_s},
               {"eval_episode_s", eval_episode_s},
-              {"max_seat_height_m", max_seat_height_m}};
+              {"max_seat_height_m", max_seat_height_m},
+              {"start", start.ToJson()},
+              {"start_noise_m", start_noise_m},
+              {"start_noise_deg", start_noise_deg}};
 }
 
 SitTask::SitTask(const SitTaskConfig& config, double control_dt)
@@ -139,6 +150,26 @@ bool SitTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState*
     pelvis_end_known_ = true;
   }
   m_.placement = PlacementFor(env);
+  if (!c_.start.banks.empty()) {
+    // The coin and the noise are drawn for every episode, bank or not (the authors' placement
+    // noise applies to both halves).
+    const double along = rng.Normal(0.0, c_.start_noise_m[0]);
+    const double across = rng.Normal(0.0, c_.start_noise_m[1]);
+    const double turn = rng.Normal(0.0, c_.start_noise_deg * M_PI / 180.0);
+    const Eigen::AngleAxisd rz(ChairYaw(env), Eigen::Vector3d::UnitZ());
+    const Eigen::Vector3d seat = env.SeatTargetWorld();
+    // Rotate the placed clip about the seat by `turn`, then shift it.
+    const Eigen::AngleAxisd rt(turn, Eigen::Vector3d::UnitZ());
+    m_.placement.yaw += turn;
+    const Eigen::Vector3d off = m_.placement.offset - Eigen::Vector3d(seat.x(), seat.y(), 0.0);
+    m_.placement.offset = rt * off + Eigen::Vector3d(seat.x(), seat.y(), 0.0) +
+                          rz * Eigen::Vector3d(along, across, 0.0);
+    const HumanoidState f0 = StartState(m_.placement, 0.0, false);
+    if (BankStart(c_.start, env, rng, RpyFromQuat(f0.root_quat).z(), f0.root_pos.head<2>(), s)) {
+      m_.t0 = 0.0;
+      return true;
+    }
+  }
   const bool rsi = c_.reference_state_init;
   m_.t0 = rsi ? rng.Uniform(0.0, c_.rsi_max_fraction * motion_.duration()) : 0.0;
   *s = StartState(m_.placement, m_.t0, rsi && c_.rsi_zero_joint_speeds);

@@ -37,6 +37,14 @@ struct SitTaskConfig {
   bool reference_state_init = true;
   double rsi_max_fraction = 0.8;
   bool rsi_zero_joint_speeds = true;
+  // Transition fine-tuning (sit_from_turn, notes 4.3): with start.prob, start from a turn end
+  // pose at the clip's frame-0 position and yaw (joints, height and velocities as sampled), and
+  // place the clip with noise (authors: dx ~ N(0.5, 1/30), dy ~ N(0, 0.1), heading N(0, pi/27)):
+  // the seated end lands at the seat target + N(0, start_noise_m) along and across, the heading
+  // turned by N(0, start_noise_deg). Otherwise reference state initialisation as configured.
+  BankStartConfig start{{}, 0.5};
+  std::array<double, 2> start_noise_m{1.0 / 30.0, 0.1};
+  double start_noise_deg = 180.0 / 27.0;
   double min_root_z = 0.54;     // early termination [m]
   int max_episode_steps = 300;  // authors: 300 control steps (4.95 s)
   // Success (paper Sec. 7, notes 4.8): pelvis continuously on the seat (pelvis touches the chair

@@ -38,7 +38,7 @@ TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
       {"reward_variant", "motion_file", "similarity", "rot_weight", "rot_alpha", "root_vel_weight",
        "root_vel_alpha", "hold_phase", "hold_pose_weight", "hold_energy_weight", "energy",
        "yaw_offset_max_deg", "min_root_z", "max_yaw_error_deg", "max_episode_steps",
-       "success_after_end_s", "success_yaw_tol_deg"},
+       "success_after_end_s", "success_yaw_tol_deg", "start"},
       ctx);
   TurnTaskConfig c;
   c.motion_file = "data/motions/" + task + ".json";
@@ -64,6 +64,7 @@ TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
   GetOptional(j, "max_episode_steps", c.max_episode_steps, ctx);
   GetOptional(j, "success_after_end_s", c.success_after_end_s, ctx);
   GetOptional(j, "success_yaw_tol_deg", c.success_yaw_tol_deg, ctx);
+  if (j.contains("start")) c.start = BankStartConfig::FromJson(j["start"], ctx + ".start");
   if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
   if (!(c.yaw_offset_max_deg >= 0 && c.yaw_offset_max_deg <= 180)) {
     throw ConfigError(ctx + ".yaw_offset_max_deg: must be in [0, 180]");
@@ -97,7 +98,8 @@ Json TurnTaskConfig::ToJson() const {
               {"max_yaw_error_deg", max_yaw_error_deg},
               {"max_episode_steps", max_episode_steps},
               {"success_after_end_s", success_after_end_s},
-              {"success_yaw_tol_deg", success_yaw_tol_deg}};
+              {"success_yaw_tol_deg", success_yaw_tol_deg},
+              {"start", start.ToJson()}};
 }
 
 TurnTask::TurnTask(const std::string& name, const TurnTaskConfig& config, double control_dt)
@@ -118,6 +120,7 @@ bool TurnTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState
       Eigen::AngleAxisd(m_.placement.yaw, Eigen::Vector3d::UnitZ()) * m_.placement.offset;
   m_.t0 = 0.0;
   *s = StartState(m_.placement, 0.0, false);
+  BankStart(c_.start, env, rng, RpyFromQuat(s->root_quat).z(), s->root_pos.head<2>(), s);
   return true;
 }
 

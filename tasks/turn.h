@@ -37,6 +37,9 @@ struct TurnTaskConfig {
   // clip ends, and then the yaw within success_yaw_tol_deg of the reference's last frame.
   double success_after_end_s = 0.5;
   double success_yaw_tol_deg = 20.0;
+  // Transition fine-tuning (turn_*_from_walk, notes 4.3): start from a walk end pose with its yaw
+  // set to the clip's placed frame-0 yaw, x, y = 0, height, joints and velocities as sampled.
+  BankStartConfig start;
 
   void ApplyVariant(const std::string& variant, const std::string& ctx);
   static TurnTaskConfig FromJson(const Json& j, const std::string& ctx, const std::string& task);

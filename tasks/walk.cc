@@ -280,4 +280,36 @@ TaskStep WalkTask::OnStep(const HumanoidChairEnv& env, const float* /*action*/) 
   return r;
 }
 
+Json WalkTask::SaveMemory() const {
+  return Json{{"t0", m_.t0},
+              {"offset", {m_.offset.x(), m_.offset.y(), m_.offset.z()}},
+              {"countdown", m_.countdown},
+              {"prev_distance", m_.prev_distance},
+              {"redrawn", m_.redrawn},
+              {"reached", m_.reached},
+              {"targets_reached", m_.targets_reached},
+              {"target_drawn_dist_m", m_.target_drawn_dist_m},
+              {"prev_q", m_.prev_q},
+              {"prev_root", {m_.prev_root.x(), m_.prev_root.y(), m_.prev_root.z()}}};
+}
+
+void WalkTask::LoadMemory(const Json& j) {
+  const std::string ctx = "walk task memory";
+  Memory m;
+  std::array<double, 3> offset{}, prev_root{};
+  GetRequired(j, "t0", m.t0, ctx);
+  GetRequired(j, "offset", offset, ctx);
+  GetRequired(j, "countdown", m.countdown, ctx);
+  GetRequired(j, "prev_distance", m.prev_distance, ctx);
+  GetRequired(j, "redrawn", m.redrawn, ctx);
+  GetRequired(j, "reached", m.reached, ctx);
+  GetRequired(j, "targets_reached", m.targets_reached, ctx);
+  GetRequired(j, "target_drawn_dist_m", m.target_drawn_dist_m, ctx);
+  GetRequired(j, "prev_q", m.prev_q, ctx);
+  GetRequired(j, "prev_root", prev_root, ctx);
+  m.offset = Eigen::Vector3d(offset[0], offset[1], offset[2]);
+  m.prev_root = Eigen::Vector3d(prev_root[0], prev_root[1], prev_root[2]);
+  m_ = m;
+}
+
 }  // namespace perch

@@ -123,6 +123,8 @@ class WalkTask : public Task {
   };
   const Memory& GetMemory() const { return m_; }
   void SetMemory(const Memory& m) { m_ = m; }
+  Json SaveMemory() const override;
+  void LoadMemory(const Json& memory) override;
   double control_dt() const { return dt_; }
 
  private:

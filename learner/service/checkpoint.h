@@ -11,17 +11,12 @@
 #include <string>
 #include <vector>
 
+#include "common/file_util.h"  // Crc32, WriteFileAtomic
 #include "common/proto/wire.pb.h"
 
 namespace perch {
 
 constexpr uint32_t kCheckpointFormat = 1;
-
-uint32_t Crc32(const void* data, size_t size);
-
-// Writes `bytes` to `path` atomically. Throws std::runtime_error naming the path on failure;
-// an existing file at `path` is left untouched then.
-void WriteFileAtomic(const std::string& path, const std::string& bytes);
 
 // Frame/unframe. ParseCheckpointFile throws CheckpointError naming the file and the problem.
 std::string FrameCheckpoint(const proto::Checkpoint& ckpt);

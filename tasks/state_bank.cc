@@ -1,0 +1,327 @@
+#include "tasks/state_bank.h"
+
+#include <openssl/evp.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+#include "common/file_util.h"
+#include "common/paths.h"
+#include "learner/policy.h"
+
+namespace perch {
+namespace {
+
+constexpr char kMagic[8] = {'P', 'E', 'R', 'C', 'H', 'B', 'N', 'K'};
+constexpr size_t kHeader = 8 + 4 + 8 + 4;
+
+void PutLe(std::string* s, uint64_t v, int bytes) {
+  for (int i = 0; i < bytes; ++i) s->push_back(static_cast<char>((v >> (8 * i)) & 0xff));
+}
+uint64_t GetLe(const std::string& s, size_t at, int bytes) {
+  uint64_t v = 0;
+  for (int i = 0; i < bytes; ++i)
+    v |= static_cast<uint64_t>(static_cast<uint8_t>(s[at + i])) << (8 * i);
+  return v;
+}
+
+proto::Vec3 V(const Eigen::Vector3d& v) {
+  proto::Vec3 p;
+  p.set_x(v.x());
+  p.set_y(v.y());
+  p.set_z(v.z());
+  return p;
+}
+Eigen::Vector3d V(const proto::Vec3& p) { return Eigen::Vector3d(p.x(), p.y(), p.z()); }
+proto::Quat Q(const Eigen::Quaterniond& q) {
+  proto::Quat p;
+  p.set_w(q.w());
+  p.set_x(q.x());
+  p.set_y(q.y());
+  p.set_z(q.z());
+  return p;
+}
+Eigen::Quaterniond Q(const proto::Quat& p) {
+  return Eigen::Quaterniond(p.w(), p.x(), p.y(), p.z());
+}
+
+std::string ReadAll(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw ConfigError(path + ": cannot open file");
+  std::ostringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+}  // namespace
+
+std::string FileSha256(const std::string& path) {
+  const std::string bytes = ReadAll(path);
+  unsigned char md[EVP_MAX_MD_SIZE];
+  unsigned int len = 0;
+  if (EVP_Digest(bytes.data(), bytes.size(), md, &len, EVP_sha256(), nullptr) != 1) {
+    throw std::runtime_error(path + ": SHA-256 failed");
+  }
+  static const char* hex = "0123456789abcdef";
+  std::string out;
+  for (unsigned int i = 0; i < len; ++i) {
+    out.push_back(hex[md[i] >> 4]);
+    out.push_back(hex[md[i] & 15]);
+  }
+  return out;
+}
+
+void WriteStateBank(const std::string& path, const proto::StateBank& bank, bool overwrite) {
+  if (!overwrite && std::filesystem::exists(path)) {
+    throw ConfigError(path + ": exists; not overwritten (a bank is an experiment's input)");
+  }
+  const std::string payload = bank.SerializeAsString();
+  std::string out(kMagic, 8);
+  PutLe(&out, kStateBankFormat, 4);
+  PutLe(&out, payload.size(), 8);
+  PutLe(&out, Crc32(payload.data(), payload.size()), 4);
+  out += payload;
+  WriteFileAtomic(path, out);
+}
+
+proto::StateBank ReadStateBank(const std::string& path, const HumanoidModel* model) {
+  const std::string bytes = ReadAll(path);
+  if (bytes.size() < kHeader || std::memcmp(bytes.data(), kMagic, 8) != 0) {
+    throw ConfigError(path + ": not a state bank (no PERCHBNK header; " +
+                      std::to_string(bytes.size()) + " bytes)");
+  }
+  const uint32_t format = static_cast<uint32_t>(GetLe(bytes, 8, 4));
+  if (format != kStateBankFormat) {
+    throw ConfigError(path + ": state bank format " + std::to_string(format) +
+                      ", this build reads " + std::to_string(kStateBankFormat) +
+                      " (resample it with this build)");
+  }
+  const uint64_t len = GetLe(bytes, 12, 8);
+  if (bytes.size() - kHeader != len) {
+    throw ConfigError(path + ": state bank payload is " + std::to_string(bytes.size() - kHeader) +
+                      " bytes, its header says " + std::to_string(len) + " (truncated or corrupt)");
+  }
+  const std::string payload = bytes.substr(kHeader);
+  if (Crc32(payload.data(), payload.size()) != static_cast<uint32_t>(GetLe(bytes, 20, 4))) {
+    throw ConfigError(path + ": state bank CRC-32 mismatch (corrupt)");
+  }
+  proto::StateBank bank;
+  if (!bank.ParseFromString(payload))
+    throw ConfigError(path + ": state bank payload does not parse");
+  if (bank.format_version() != kStateBankFormat) {
+    throw ConfigError(path + ": state bank message version " +
+                      std::to_string(bank.format_version()) + " (expected " +
+                      std::to_string(kStateBankFormat) + ")");
+  }
+  if (bank.states_size() == 0) throw ConfigError(path + ": state bank holds no states");
+  const int nj = bank.joint_names_size();
+  if (model != nullptr) {
+    bool same = nj == model->num_joints();
+    for (int j = 0; same && j < nj; ++j) same = bank.joint_names(j) == model->joint(j).name;
+    if (!same) {
+      throw ConfigError(path + ": state bank joint layout (" + std::to_string(nj) +
+                        " joints) differs from the humanoid's (" +
+                        std::to_string(model->num_joints()) + "): sampled from another model");
+    }
+  }
+  for (int i = 0; i < bank.states_size(); ++i) {
+    const proto::BankState& s = bank.states(i);
+    if (s.q_size() != nj || s.qd_size() != nj) {
+      throw ConfigError(path + ": state " + std::to_string(i) + " has " +
+                        std::to_string(s.q_size()) + " joint angles, the bank's layout " +
+                        std::to_string(nj));
+    }
+    const Eigen::Quaterniond q = Q(s.root_quat());
+    if (!V(s.root_pos()).allFinite() || !std::isfinite(q.norm()) || std::abs(q.norm() - 1) > 1e-3) {
+      throw ConfigError(path + ": state " + std::to_string(i) +
+                        " has a non-finite position or "
+                        "a non-unit orientation");
+    }
+  }
+  return bank;
+}
+
+proto::BankState CaptureState(const HumanoidChairEnv& env) {
+  const EnvState es = env.GetState();
+  const HumanoidState& h = es.world.humanoid;
+  proto::BankState b;
+  *b.mutable_root_pos() = V(h.root_pos);
+  *b.mutable_root_quat() = Q(h.root_quat);
+  *b.mutable_root_lin_vel() = V(h.root_lin_vel);
+  *b.mutable_root_ang_vel() = V(h.root_ang_vel);
+  for (int j = 0; j < HumanoidModel::kNumJoints; ++j) {
+    b.add_q(h.q[j]);
+    b.add_qd(h.qd[j]);
+  }
+  b.set_has_chair(env.world().has_chair());
+  if (b.has_chair()) {
+    *b.mutable_chair_pos() = V(es.world.chair.pos);
+    *b.mutable_chair_quat() = Q(es.world.chair.quat);
+    *b.mutable_chair_lin_vel() = V(es.world.chair.lin_vel);
+    *b.mutable_chair_ang_vel() = V(es.world.chair.ang_vel);
+  }
+  b.set_foot_right(es.foot_flags[0]);
+  b.set_foot_left(es.foot_flags[1]);
+  b.set_step(es.step);
+  b.set_walk_target_x(es.walk_target.x());
+  b.set_walk_target_y(es.walk_target.y());
+  b.set_task_memory_json(env.task().SaveMemory().dump());
+  return b;
+}
+
+HumanoidState HumanoidStateOf(const proto::BankState& b) {
+  HumanoidState h;
+  h.root_pos = V(b.root_pos());
+  h.root_quat = Q(b.root_quat()).normalized();
+  h.root_lin_vel = V(b.root_lin_vel());
+  h.root_ang_vel = V(b.root_ang_vel());
+  for (int j = 0; j < HumanoidModel::kNumJoints && j < b.q_size(); ++j) {
+    h.q[j] = b.q(j);
+    h.qd[j] = b.qd(j);
+  }
+  return h;
+}
+
+EnvState EnvStateOf(const proto::BankState& b) {
+  EnvState es;
+  es.world.humanoid = HumanoidStateOf(b);
+  if (b.has_chair()) {
+    es.world.chair.pos = V(b.chair_pos());
+    es.world.chair.quat = Q(b.chair_quat()).normalized();
+    es.world.chair.lin_vel = V(b.chair_lin_vel());
+    es.world.chair.ang_vel = V(b.chair_ang_vel());
+  }
+  es.foot_flags = {b.foot_right(), b.foot_left()};
+  es.step = b.step();
+  es.walk_target = Eigen::Vector2d(b.walk_target_x(), b.walk_target_y());
+  return es;
+}
+
+proto::StateBank SampleEndPoses(const TaskEnvConfig& config, const proto::ModelWeights& weights,
+                                const SampleEndPosesOptions& o) {
+  if (o.steps < 1 || o.survive < 0 || o.count < 1 || o.workers < 1) {
+    throw ConfigError("sample-end-poses: need steps >= 1, survive >= 0, count >= 1, workers >= 1");
+  }
+  const PolicyConfig pc = PolicyConfigFromShape(weights.shape(), "model");
+  std::vector<std::unique_ptr<HumanoidChairEnv>> envs;
+  for (int w = 0; w < o.workers; ++w) envs.push_back(MakeTaskHumanoidEnv(config));
+  const EnvSpec& spec = envs[0]->spec();
+  if (pc.kind != PolicyKind::kGaussian || pc.obs_dim != spec.obs_dim ||
+      pc.act_dim != spec.act_dim) {
+    throw ConfigError("model: obs " + std::to_string(pc.obs_dim) + " act " +
+                      std::to_string(pc.act_dim) + " does not fit the " + config.env.task +
+                      " env (obs " + std::to_string(spec.obs_dim) + ")");
+  }
+  const int horizon = o.steps + o.survive;
+  if (horizon > spec.max_episode_steps) {
+    throw ConfigError("sample-end-poses: --steps + --survive = " + std::to_string(horizon) +
+                      " exceeds the task's time limit of " +
+                      std::to_string(spec.max_episode_steps) + " steps");
+  }
+  std::mutex mu;
+  std::map<int64_t, std::unique_ptr<proto::BankState>> done;  // episode -> state (null: fell)
+  std::atomic<int64_t> next{0};
+  std::atomic<bool> stop{false};
+  int64_t prefix = 0;  // episodes [0, prefix) are all done
+  int prefix_ok = 0;   // survivors among them
+  auto worker = [&](int w) {
+    HumanoidChairEnv& env = *envs[w];
+    PolicyRunner runner(pc, NormalizerConfig());
+    runner.LoadWeights(weights);
+    runner.set_update_obs_stats(false);  // the policy's own saved normaliser
+    std::vector<float> obs(spec.obs_dim), nxt(spec.obs_dim), act(spec.act_dim);
+    while (!stop.load()) {
+      const int64_t e = next.fetch_add(1);
+      const uint64_t episode_seed = o.seed * 1000003ULL + static_cast<uint64_t>(e);
+      env.Seed(2 * episode_seed);
+      Rng act_rng(2 * episode_seed + 1);
+      env.Reset(obs.data());
+      std::unique_ptr<proto::BankState> kept;
+      bool ok = true;
+      for (int k = 1; k <= horizon; ++k) {
+        runner.Act(obs.data(), act_rng, !o.stochastic, nullptr, act.data());
+        const StepResult r = env.Step(act.data(), nxt.data());
+        obs.swap(nxt);
+        if (r.terminated) {
+          ok = false;
+          break;
+        }
+        if (k == o.steps) {
+          kept = std::make_unique<proto::BankState>(CaptureState(env));
+          kept->set_episode(static_cast<uint64_t>(e));
+        }
+      }
+      std::lock_guard<std::mutex> lock(mu);
+      done[e] = ok ? std::move(kept) : nullptr;
+      for (auto it = done.find(prefix); it != done.end(); it = done.find(prefix)) {
+        prefix_ok += it->second != nullptr;
+        ++prefix;
+      }
+      if (prefix_ok >= o.count) stop = true;
+    }
+  };
+  std::vector<std::thread> threads;
+  for (int w = 0; w < o.workers; ++w) threads.emplace_back(worker, w);
+  auto last = std::chrono::steady_clock::now();
+  while (!stop.load()) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    if (o.progress && std::chrono::steady_clock::now() - last > std::chrono::seconds(1)) {
+      last = std::chrono::steady_clock::now();
+      std::lock_guard<std::mutex> lock(mu);
+      o.progress(prefix_ok, prefix);
+    }
+  }
+  for (auto& t : threads) t.join();
+  proto::StateBank bank;
+  bank.set_format_version(kStateBankFormat);
+  bank.set_task(config.env.task);
+  bank.set_model_version(weights.version());
+  for (int j = 0; j < envs[0]->model().num_joints(); ++j) {
+    bank.add_joint_names(envs[0]->model().joint(j).name);
+  }
+  bank.set_steps(o.steps);
+  bank.set_survive(o.survive);
+  bank.set_count(o.count);
+  bank.set_seed(o.seed);
+  bank.set_stochastic(o.stochastic);
+  bank.set_env_config_json(config.ToJson().dump());
+  // The first `count` survivors by episode index: the same whatever the workers did beyond.
+  int64_t episodes = 0;
+  for (auto& [e, s] : done) {
+    if (bank.states_size() >= o.count) break;
+    episodes = e + 1;
+    if (s) *bank.add_states() = std::move(*s);
+  }
+  bank.set_episodes_run(episodes);
+  if (o.progress) o.progress(bank.states_size(), episodes);
+  return bank;
+}
+
+std::shared_ptr<const StartBank> LoadStartBanks(const std::vector<std::string>& paths,
+                                                const HumanoidModel& model) {
+  static std::mutex mu;
+  static std::map<std::string, std::weak_ptr<const StartBank>> cache;
+  std::string key;
+  for (const std::string& p : paths) key += p + "\n";
+  std::lock_guard<std::mutex> lock(mu);
+  if (auto hit = cache[key].lock()) return hit;
+  auto bank = std::make_shared<StartBank>();
+  for (const std::string& p : paths) {
+    const std::string path = ResolveProjectPath(p);
+    const proto::StateBank b = ReadStateBank(path, &model);
+    bank->states.insert(bank->states.end(), b.states().begin(), b.states().end());
+    bank->path += (bank->path.empty() ? "" : ", ") + path;
+  }
+  cache[key] = bank;
+  return bank;
+}
+
+}  // namespace perch

@@ -1,0 +1,168 @@
+#include "tasks/state_bank.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "learner/ppo.h"
+#include "tasks/turn.h"
+
+namespace perch {
+namespace {
+
+namespace fs = std::filesystem;
+
+proto::ModelWeights Untrained(int obs_dim, uint64_t seed) {
+  PpoLearner learner(PolicyConfig::Subtask(obs_dim), PpoConfig::Subtask(), seed);
+  proto::ModelWeights w;
+  learner.ExportWeights(&w);
+  return w;
+}
+
+proto::StateBank SmallWalkBank(int workers, uint64_t seed = 3) {
+  SampleEndPosesOptions o;
+  o.steps = 6;
+  o.survive = 4;
+  o.count = 5;
+  o.seed = seed;
+  o.workers = workers;
+  return SampleEndPoses(TaskEnvConfig::Defaults("walk"), Untrained(52, 1), o);
+}
+
+std::string Temp(const std::string& name) {
+  const std::string p = ::testing::TempDir() + "/" + name;
+  fs::remove(p);
+  return p;
+}
+
+std::string ErrorOf(const std::string& path, const HumanoidModel* model) {
+  try {
+    ReadStateBank(path, model);
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(StateBank, SamplingIsDeterministicWhateverTheWorkers) {
+  const proto::StateBank a = SmallWalkBank(1), b = SmallWalkBank(3);
+  ASSERT_EQ(a.states_size(), 5);
+  EXPECT_EQ(a.SerializeAsString(), b.SerializeAsString());
+  EXPECT_NE(SmallWalkBank(1, 4).SerializeAsString(), a.SerializeAsString());
+  EXPECT_EQ(a.steps(), 6);
+  EXPECT_GE(a.episodes_run(), 5);
+  for (const proto::BankState& s : a.states()) EXPECT_EQ(s.step(), 6);  // after exactly N steps
+}
+
+TEST(StateBank, FileRoundTripAndEveryDamageRefusedWithTheReason) {
+  const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
+  const proto::StateBank bank = SmallWalkBank(2);
+  const std::string path = Temp("bank.bin");
+  WriteStateBank(path, bank, false);
+  EXPECT_EQ(ReadStateBank(path, &model).SerializeAsString(), bank.SerializeAsString());
+  // Never overwritten by accident.
+  EXPECT_THROW(WriteStateBank(path, bank, false), ConfigError);
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string bytes = ss.str();
+  auto write = [&](const std::string& name, const std::string& b) {
+    const std::string p = Temp(name);
+    std::ofstream(p, std::ios::binary) << b;
+    return p;
+  };
+  std::string e = ErrorOf(write("trunc.bin", bytes.substr(0, bytes.size() - 10)), &model);
+  EXPECT_NE(e.find("truncated"), std::string::npos) << e;
+  EXPECT_NE(e.find("trunc.bin"), std::string::npos) << e;
+  std::string flipped = bytes;
+  flipped[flipped.size() / 2] ^= 0x5a;
+  e = ErrorOf(write("flip.bin", flipped), &model);
+  EXPECT_NE(e.find("CRC"), std::string::npos) << e;
+  std::string v2 = bytes;
+  v2[8] = 2;  // format version field
+  e = ErrorOf(write("v2.bin", v2), &model);
+  EXPECT_NE(e.find("format 2"), std::string::npos) << e;
+  e = ErrorOf(write("junk.bin", "hello"), &model);
+  EXPECT_NE(e.find("not a state bank"), std::string::npos) << e;
+  // Another joint layout (a model whose joints are named otherwise).
+  proto::StateBank other = bank;
+  other.set_joint_names(0, "tail");
+  const std::string op = Temp("other.bin");
+  WriteStateBank(op, other, false);
+  e = ErrorOf(op, &model);
+  EXPECT_NE(e.find("joint layout"), std::string::npos) << e;
+  EXPECT_EQ(ErrorOf(op, nullptr), "");  // without a model to compare, the layout is not judged
+}
+
+// A captured state continues the episode exactly: same observations and rewards as the original.
+TEST(StateBank, CapturedStateAndTaskMemoryContinueTheEpisodeExactly) {
+  TaskEnvConfig c = TaskEnvConfig::Defaults("walk");
+  c.walk.stage = WalkStage::kTarget;
+  auto a = MakeTaskHumanoidEnv(c), b = MakeTaskHumanoidEnv(c);
+  std::vector<float> obs(52), oa(52), ob(52), act(21);
+  Rng rng(9);
+  a->Seed(4);
+  a->Reset(obs.data());
+  for (int k = 0; k < 20; ++k) {
+    for (float& x : act) x = static_cast<float>(rng.Normal() * 0.3);
+    a->Step(act.data(), oa.data());
+  }
+  const proto::BankState s = CaptureState(*a);
+  // Both continue from a rebuilt world (Bullet's contact caches are not part of any state): the
+  // original through its own capture, the other after another episode.
+  a->SetState(EnvStateOf(s));
+  b->Seed(77);
+  b->Reset(obs.data());  // another episode, then restored
+  b->SetState(EnvStateOf(s));
+  const_cast<Task&>(b->task()).LoadMemory(Json::parse(s.task_memory_json()));
+  for (int k = 0; k < 15; ++k) {
+    for (float& x : act) x = static_cast<float>(rng.Normal() * 0.3);
+    const StepResult ra = a->Step(act.data(), oa.data());
+    const StepResult rb = b->Step(act.data(), ob.data());
+    ASSERT_EQ(ra.reward, rb.reward) << k;
+    for (int i = 0; i < 52; ++i) ASSERT_EQ(oa[i], ob[i]) << k << " " << i;
+  }
+}
+
+TEST(StateBank, TurnFromWalkStartsFromABankPoseTurnedToTheClipsHeading) {
+  const proto::StateBank bank = SmallWalkBank(2);
+  const std::string path = Temp("walk_bank.bin");
+  WriteStateBank(path, bank, false);
+  auto env = MakeTaskHumanoidEnv(TaskEnvConfig::FromJson(
+      {{"task", "turn_left"}, {"chair", "none"}, {"turn_left", {{"start", {{"banks", {path}}}}}}},
+      "t"));
+  const auto& task = dynamic_cast<const TurnTask&>(env->task());
+  std::vector<float> obs(50);
+  for (int seed = 0; seed < 4; ++seed) {
+    env->Seed(seed);
+    env->Reset(obs.data());
+    EXPECT_TRUE(task.started_from_bank());
+    const HumanoidState& h = env->humanoid_state();
+    // Joints of one of the bank's states; root over the origin; heading = the placed clip's.
+    bool found = false;
+    for (const proto::BankState& s : bank.states()) {
+      bool same = true;
+      for (int j = 0; j < 21; ++j) same = same && std::abs(s.q(j) - h.q[j]) < 1e-6;
+      found = found || same;
+    }
+    EXPECT_TRUE(found);
+    EXPECT_NEAR(h.root_pos.head<2>().norm(), 0.0, 1e-6);
+    const double ref_yaw = RpyFromQuat(task.ReferenceAt(0).root_rot).z();
+    EXPECT_NEAR(AngleDiff(env->RootRpy().z(), ref_yaw), 0.0, 1e-6);
+  }
+  // A bank that is not there is refused when the config is read, naming the field.
+  try {
+    TaskEnvConfig::FromJson(
+        {{"task", "turn_left"}, {"turn_left", {{"start", {{"banks", {"/nonexistent.bin"}}}}}}},
+        "f.json");
+    ADD_FAILURE() << "no error";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("f.json.turn_left.start.banks"), std::string::npos)
+        << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace perch
