@@ -34,6 +34,7 @@ struct ConfigOverrides {
   std::string start;               // "fixed", "reference" or "end-poses"
   std::vector<std::string> banks;  // --start end-poses: the start-state banks
   double target_turn_prob = -1.0;
+  double start_noise = 0.02;  // turn / sit: start_joint_noise_rad for evaluation [rad]
 };
 
 // The experiment config saved with a model: a checkpoint's resolved config, or a run dir's
@@ -122,6 +123,9 @@ TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_p
     // Evaluation starts from the clip's first frame (Table 4), unless asked otherwise.
     sec["reference_state_init"] = o.start == "reference";
   }
+  if (task == "turn_left" || task == "turn_right" || task == "sit") {
+    sec["start_joint_noise_rad"] = o.start_noise;
+  }
   if (o.start == "end-poses") {
     if (o.banks.empty()) throw ConfigError("--start end-poses: needs --bank FILE");
     if (task != "turn_left" && task != "turn_right" && task != "sit") {
@@ -189,6 +193,11 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "frame), reference (a random phase of the reference motion) or end-poses "
                   "(states of --bank, e.g. walk end poses for a turn)")
       ->check(CLI::IsMember({"fixed", "reference", "end-poses"}));
+  cmd->add_option("--start-noise", o->cfg.start_noise,
+                  "turn / sit: joint angles of the start pose += U(-x, x) rad, so episodes are "
+                  "distinct trials (0: every mean-action episode is the same)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 0.5));
   cmd->add_option("--bank", o->cfg.banks,
                   "start-state bank(s) for --start end-poses (perch sample-end-poses); several: "
                   "their union");

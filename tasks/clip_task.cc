@@ -136,6 +136,15 @@ void ClipTask::RootVelocities(bool fd, const HumanoidChairEnv& env, int k, Eigen
   }
 }
 
+void ClipTask::PerturbJoints(double rad, const HumanoidChairEnv& env, Rng& rng,
+                             HumanoidState* s) {
+  if (!(rad > 0)) return;  // no draws when off, so other runs keep their streams
+  const HumanoidModel& m = env.model();
+  for (int j = 0; j < m.num_joints(); ++j) {
+    s->q[j] = std::clamp(s->q[j] + rng.Uniform(-rad, rad), m.joint(j).lower, m.joint(j).upper);
+  }
+}
+
 bool ClipTask::BankStart(const BankStartConfig& c, const HumanoidChairEnv& env, Rng& rng,
                          double yaw, const Eigen::Vector2d& xy, HumanoidState* s) {
   from_bank_ = false;

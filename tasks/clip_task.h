@@ -93,6 +93,8 @@ class ClipTask : public Task {
   // A bank state with its yaw set to `yaw` and its root moved to `xy` (height, joints and
   // velocities as sampled; velocities rotated with the yaw), or false when this episode starts
   // from the clip (no bank, or the coin said so). Loads the banks at the first call.
+  // Joint angles += U(-rad, rad), kept inside the joint limits (evaluation: distinct trials).
+  static void PerturbJoints(double rad, const HumanoidChairEnv& env, Rng& rng, HumanoidState* s);
   bool BankStart(const BankStartConfig& c, const HumanoidChairEnv& env, Rng& rng, double yaw,
                  const Eigen::Vector2d& xy, HumanoidState* s);
 

@@ -28,15 +28,31 @@ void SitTaskConfig::ApplyVariant(const std::string& variant, const std::string& 
 
 SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(
-      j,
-      {"reward_variant",    "motion_file",           "similarity",           "approach_weight",
-       "hold_phase",        "hold_pose_weight",      "hold_energy_weight",   "energy",
-       "pelvis_end_offset", "clip_seat_height_m",    "adapt_to_seat_height", "reference_state_init",
-       "rsi_max_fraction",  "rsi_zero_joint_speeds", "min_root_z",           "max_episode_steps",
-       "success_contact_s", "eval_episode_s",        "max_seat_height_m",    "start",
-       "start_noise_m",     "start_noise_deg"},
-      ctx);
+  CheckKnownKeys(j,
+                 {"reward_variant",
+                  "motion_file",
+                  "similarity",
+                  "approach_weight",
+                  "hold_phase",
+                  "hold_pose_weight",
+                  "hold_energy_weight",
+                  "energy",
+                  "pelvis_end_offset",
+                  "clip_seat_height_m",
+                  "adapt_to_seat_height",
+                  "reference_state_init",
+                  "rsi_max_fraction",
+                  "rsi_zero_joint_speeds",
+                  "min_root_z",
+                  "max_episode_steps",
+                  "start_joint_noise_rad",
+                  "success_contact_s",
+                  "eval_episode_s",
+                  "max_seat_height_m",
+                  "start",
+                  "start_noise_m",
+                  "start_noise_deg"},
+                 ctx);
   SitTaskConfig c;
   std::string variant = c.reward_variant;
   GetOptional(j, "reward_variant", variant, ctx);
@@ -62,6 +78,10 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "rsi_zero_joint_speeds", c.rsi_zero_joint_speeds, ctx);
   GetOptional(j, "min_root_z", c.min_root_z, ctx);
   GetOptional(j, "max_episode_steps", c.max_episode_steps, ctx);
+  GetOptional(j, "start_joint_noise_rad", c.start_joint_noise_rad, ctx);
+  if (!(c.start_joint_noise_rad >= 0 && c.start_joint_noise_rad <= 0.5)) {
+    throw ConfigError(ctx + ".start_joint_noise_rad: must be in [0, 0.5] rad");
+  }
   GetOptional(j, "success_contact_s", c.success_contact_s, ctx);
   GetOptional(j, "eval_episode_s", c.eval_episode_s, ctx);
   GetOptional(j, "max_seat_height_m", c.max_seat_height_m, ctx);
@@ -106,6 +126,7 @@ Json SitTaskConfig::ToJson() const {
               {"rsi_zero_joint_speeds", rsi_zero_joint_speeds},
               {"min_root_z", min_root_z},
               {"max_episode_steps", max_episode_steps},
+              {"start_joint_noise_rad", start_joint_noise_rad},
               {"success_contact_s", success_contact_s},
               {"eval_episode_s", eval_episode_s},
               {"max_seat_height_m", max_seat_height_m},
@@ -167,12 +188,14 @@ bool SitTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState*
     const HumanoidState f0 = StartState(m_.placement, 0.0, false);
     if (BankStart(c_.start, env, rng, RpyFromQuat(f0.root_quat).z(), f0.root_pos.head<2>(), s)) {
       m_.t0 = 0.0;
+      PerturbJoints(c_.start_joint_noise_rad, env, rng, s);
       return true;
     }
   }
   const bool rsi = c_.reference_state_init;
   m_.t0 = rsi ? rng.Uniform(0.0, c_.rsi_max_fraction * motion_.duration()) : 0.0;
   *s = StartState(m_.placement, m_.t0, rsi && c_.rsi_zero_joint_speeds);
+  PerturbJoints(c_.start_joint_noise_rad, env, rng, s);
   return true;
 }
 

@@ -46,7 +46,11 @@ struct SitTaskConfig {
   std::array<double, 2> start_noise_m{1.0 / 30.0, 0.1};
   double start_noise_deg = 180.0 / 27.0;
   double min_root_z = 0.54;     // early termination [m]
-  int max_episode_steps = 300;  // authors: 300 control steps (4.95 s)
+  int max_episode_steps = 300;
+  // Joint angles of the start pose += U(-x, x) [rad] (0: the paper). perch eval uses 0.02 so that
+  // its episodes are distinct trials: from exactly one start with mean actions every episode of
+  // a deterministic simulation is the same.
+  double start_joint_noise_rad = 0.0;  // authors: 300 control steps (4.95 s)
   // Success (paper Sec. 7, notes 4.8): pelvis continuously on the seat (pelvis touches the chair
   // and pelvis z < env.seat_contact_max_pelvis_z) for this long.
   double success_contact_s = 3.0;

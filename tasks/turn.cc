@@ -38,7 +38,7 @@ TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
       {"reward_variant", "motion_file", "similarity", "rot_weight", "rot_alpha", "root_vel_weight",
        "root_vel_alpha", "hold_phase", "hold_pose_weight", "hold_energy_weight", "energy",
        "yaw_offset_max_deg", "min_root_z", "max_yaw_error_deg", "max_episode_steps",
-       "success_after_end_s", "success_yaw_tol_deg", "start"},
+       "start_joint_noise_rad", "success_after_end_s", "success_yaw_tol_deg", "start"},
       ctx);
   TurnTaskConfig c;
   c.motion_file = "data/motions/" + task + ".json";
@@ -62,6 +62,10 @@ TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
   GetOptional(j, "min_root_z", c.min_root_z, ctx);
   GetOptional(j, "max_yaw_error_deg", c.max_yaw_error_deg, ctx);
   GetOptional(j, "max_episode_steps", c.max_episode_steps, ctx);
+  GetOptional(j, "start_joint_noise_rad", c.start_joint_noise_rad, ctx);
+  if (!(c.start_joint_noise_rad >= 0 && c.start_joint_noise_rad <= 0.5)) {
+    throw ConfigError(ctx + ".start_joint_noise_rad: must be in [0, 0.5] rad");
+  }
   GetOptional(j, "success_after_end_s", c.success_after_end_s, ctx);
   GetOptional(j, "success_yaw_tol_deg", c.success_yaw_tol_deg, ctx);
   if (j.contains("start")) c.start = BankStartConfig::FromJson(j["start"], ctx + ".start");
@@ -97,6 +101,7 @@ Json TurnTaskConfig::ToJson() const {
               {"min_root_z", min_root_z},
               {"max_yaw_error_deg", max_yaw_error_deg},
               {"max_episode_steps", max_episode_steps},
+              {"start_joint_noise_rad", start_joint_noise_rad},
               {"success_after_end_s", success_after_end_s},
               {"success_yaw_tol_deg", success_yaw_tol_deg},
               {"start", start.ToJson()}};
@@ -121,6 +126,7 @@ bool TurnTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState
   m_.t0 = 0.0;
   *s = StartState(m_.placement, 0.0, false);
   BankStart(c_.start, env, rng, RpyFromQuat(s->root_quat).z(), s->root_pos.head<2>(), s);
+  PerturbJoints(c_.start_joint_noise_rad, env, rng, s);
   return true;
 }
 

@@ -32,7 +32,11 @@ struct TurnTaskConfig {
   double yaw_offset_max_deg = 180.0;  // yaw offset ~ U(-max, max) per episode (notes 4.3)
   double min_root_z = 0.78;           // early termination [m]
   double max_yaw_error_deg = 45.0;    // early termination: |yaw - reference yaw| above [deg]
-  int max_episode_steps = 300;        // authors: 300 control steps (4.95 s)
+  int max_episode_steps = 300;
+  // Joint angles of the start pose += U(-x, x) [rad] (0: the paper). perch eval uses 0.02 so that
+  // its episodes are distinct trials: from exactly one start with mean actions every episode of
+  // a deterministic simulation is the same.
+  double start_joint_noise_rad = 0.0;        // authors: 300 control steps (4.95 s)
   // Success (ours; docs/subtasks.md): no early termination until success_after_end_s after the
   // clip ends, and then the yaw within success_yaw_tol_deg of the reference's last frame.
   double success_after_end_s = 0.5;

@@ -159,3 +159,29 @@ TEST(TurnTask, ConfigErrorsNameTheField) {
 
 }  // namespace
 }  // namespace perch
+
+namespace perch {
+namespace {
+
+TEST(TurnTask, StartJointNoiseMakesDistinctTrialsWithinItsBound) {
+  auto env = MakeTurnEnv("turn_left", Json{{"start_joint_noise_rad", 0.05}});
+  std::vector<float> obs(50);
+  const MotionPose f0 = TaskOf(*env).motion().frame(0);
+  std::vector<double> first;
+  for (int seed = 0; seed < 2; ++seed) {
+    env->Seed(seed);
+    env->Reset(obs.data());
+    double moved = 0;
+    for (int j = 0; j < 21; ++j) {
+      const double d = env->humanoid_state().q[j] - f0.q[j];
+      EXPECT_LE(std::abs(d), 0.05 + 1e-6) << j;
+      moved += std::abs(d);
+    }
+    EXPECT_GT(moved, 0.05);
+    first.push_back(env->humanoid_state().q[5]);
+  }
+  EXPECT_NE(first[0], first[1]);
+}
+
+}  // namespace
+}  // namespace perch
