@@ -12,9 +12,11 @@
 #include <vector>
 
 #include "app/commands.h"
+#include "common/paths.h"
 #include "envs/chair.h"
 #include "learner/model_average.h"
 #include "learner/service/checkpoint.h"
+#include "tasks/hierarchy.h"
 #include "tasks/local_train.h"
 #include "tasks/registry.h"
 #include "tasks/state_bank.h"
@@ -156,8 +158,17 @@ TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_p
 
 std::vector<std::string> EvalTaskNames() {
   std::vector<std::string> names = TaskNames();
+  names.push_back("chain");  // the scripted walk -> turn -> sit chain (tasks/hierarchy.h)
   return names;
 }
+
+struct ChainFlags {
+  int zone = 1;
+  std::array<std::string, kNumSubtasks> models = {
+      "models/turn_left/policy.bin", "models/turn_right/policy.bin", "models/sit/policy.bin",
+      "models/walk_stage2_fallrestart/checkpoints/ckpt-0000013900.bin"};
+  ChainOptions options;
+};
 
 }  // namespace
 
@@ -180,8 +191,8 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       ->check(CLI::IsMember(EvalTaskNames()));
   cmd->add_option("--model", o->model,
                   "policy: a PERCHCKP cluster checkpoint (carries its config), a run dir (its "
-                  "newest checkpoint and config.json), or a ModelWeights / LearnerState file")
-      ->required();
+                  "newest checkpoint and config.json), or a ModelWeights / LearnerState file "
+                  "(required but for --task chain)");
   cmd->add_option("--config", o->cfg.config_path,
                   "task env config JSON, or an experiment / run config.json (its env section); "
                   "default: the config saved with the model, else the task's defaults");
@@ -225,7 +236,62 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   cmd->add_flag("--fixed-window", o->fixed_window,
                 "one world window for all panels (default: each panel follows the humanoid)");
   cmd->add_flag("--json", o->json, "print one JSON object on stdout");
-  cmd->callback([o]() {
+  auto chain = std::make_shared<ChainFlags>();
+  cmd->add_option("--zone", chain->zone, "chain: spawn zone (1 easy, 2 lateral, 3 rear)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 3));
+  for (int id = 0; id < kNumSubtasks; ++id) {
+    const std::string flag = std::string("--") + SubtaskName(id) + "-model";
+    std::string dashed = flag;
+    std::replace(dashed.begin(), dashed.end(), '_', '-');
+    cmd->add_option(dashed, chain->models[id],
+                    std::string("chain: the ") + SubtaskName(id) + " policy")
+        ->capture_default_str();
+  }
+  cmd->callback([o, chain]() {
+    if (o->cfg.task == "chain") {
+      // The scripted chain: four subtask policies on the sit_chair env, no meta policy.
+      Json env{{"task", "sit_chair"},
+               {"chair", o->cfg.chair.empty() ? "authors" : o->cfg.chair},
+               {"spawn", {{"zone", chain->zone}}}};
+      if (!o->cfg.config_path.empty()) {
+        env = TaskEnvConfig::Load(o->cfg.config_path).ToJson();
+        env["spawn"]["zone"] = chain->zone;
+      }
+      const TaskEnvConfig config = TaskEnvConfig::FromJson(env, "--task chain");
+      std::array<proto::ModelWeights, kNumSubtasks> models;
+      std::array<std::string, kNumSubtasks> files;
+      for (int id = 0; id < kNumSubtasks; ++id) {
+        files[id] = ModelFile(ResolveProjectPath(chain->models[id]));
+        models[id] = LoadModelFile(files[id]);
+      }
+      chain->options.episodes = o->eval.episodes;
+      chain->options.seed = o->eval.seed;
+      chain->options.stochastic = o->eval.stochastic;
+      std::vector<PoseFrame> frames;
+      Json result = EvaluateChain(config, models, files, chain->options,
+                                  o->filmstrip.empty() ? nullptr : &frames);
+      if (!o->filmstrip.empty()) {
+        const Chair chair = Chair::Load(config.env.ChairPath());
+        const HumanoidModel model = HumanoidModel::Load(config.env.HumanoidPath());
+        FilmstripOptions fo;
+        fo.panel_px = o->panel_px;
+        fo.follow = !o->fixed_window;
+        RenderFilmstrip(model, &chair, config.env.chair_placement.Transform(),
+                        PickFrames(frames, o->frames), fo)
+            .SavePng(o->filmstrip);
+        result["filmstrip"] = o->filmstrip;
+      }
+      if (o->json) {
+        std::cout << result.dump() << "\n";
+      } else {
+        std::cout << "chain zone " << chain->zone << ": success_rate " << result["success_rate"]
+                  << " " << result["success_ci95"].dump() << ", min_dist "
+                  << result["min_dist_mean_m"] << " +- " << result["min_dist_std_m"] << " m\n";
+      }
+      return;
+    }
+    if (o->model.empty()) throw ConfigError("--model: required (but for --task chain)");
     const TaskEnvConfig config = ResolveConfig(o->cfg, o->model);
     const std::string model_file = ModelFile(o->model);
     const proto::ModelWeights weights = LoadModelFile(model_file);

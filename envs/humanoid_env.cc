@@ -335,6 +335,14 @@ Eigen::Vector3d HumanoidChairEnv::BodyXyz() const {
 }
 
 void HumanoidChairEnv::WriteObs(float* obs) {
+  // feet(2): [right, left] floor contact, one step late when lagged (notes 1.5).
+  const std::array<bool, 2> now = {contacts_.foot_floor[0], contacts_.foot_floor[1]};
+  shown_flags_ = config_.obs.foot_contact_lag ? foot_flags_ : now;
+  foot_flags_ = now;
+  WriteObservation(config_.obs_layout, obs);
+}
+
+void HumanoidChairEnv::WriteObservation(ObsLayout layout, float* obs) const {
   const ObsConfig& oc = config_.obs;
   const double clip = oc.clip;
   const HumanoidState& s = state_;
@@ -351,19 +359,15 @@ void HumanoidChairEnv::WriteObs(float* obs) {
     obs[k++] = Clip(model_.joint(j).Normalize(s.q[j]), clip);
     obs[k++] = Clip(oc.joint_speed_scale * s.qd[j], clip);
   }
-  // feet(2): [right, left] floor contact, one step late when lagged (notes 1.5).
-  const std::array<bool, 2> now = {contacts_.foot_floor[0], contacts_.foot_floor[1]};
-  const std::array<bool, 2>& shown = oc.foot_contact_lag ? foot_flags_ : now;
-  obs[k++] = shown[0] ? 1.0f : 0.0f;
-  obs[k++] = shown[1] ? 1.0f : 0.0f;
-  foot_flags_ = now;
-  if (config_.obs_layout == ObsLayout::kProprioGoal) {
+  obs[k++] = shown_flags_[0] ? 1.0f : 0.0f;
+  obs[k++] = shown_flags_[1] ? 1.0f : 0.0f;
+  if (layout == ObsLayout::kProprioGoal) {
     // goal(2): sin, cos of the walk target's azimuth relative to the heading.
     const Eigen::Vector3d b = BodyXyz();
     const double psi = std::atan2(walk_target_.y() - b.y(), walk_target_.x() - b.x()) - yaw;
     obs[k++] = Clip(std::sin(psi), clip);
     obs[k++] = Clip(std::cos(psi), clip);
-  } else if (config_.obs_layout == ObsLayout::kProprioChair) {
+  } else if (layout == ObsLayout::kProprioChair) {
     // chair(7): pelvis -> seat target in the torso frame; conjugate torso quaternion relative to
     // the chair frame (= world for the authors' unrotated chair), x y z w with w >= 0.
     const Eigen::Vector3d p =

@@ -81,6 +81,10 @@ class HumanoidChairEnv : public Env {
   EnvState GetState() const;
   void SetState(const EnvState& s);  // continues exactly as from the saved point
 
+  // The current observation in any layout (the configured one is what Reset / Step wrote): the
+  // hierarchy runs subtask policies that observe differently on one env. Valid after Reset / Step.
+  void WriteObservation(ObsLayout layout, float* obs) const;
+
   // Queries for tasks, metrics and tests (valid after Reset / Step).
   const HumanoidModel& model() const { return model_; }
   const Task& task() const { return *task_; }
@@ -95,7 +99,7 @@ class HumanoidChairEnv : public Env {
   double SeatContactMaxPelvisZ() const;  // [m]
   // This episode's chair (env.chair, or a random one under chair_random); null without a chair.
   const Chair* chair() const { return chair_.get(); }
-  double PelvisSeatDistance() const;  // 3-D distance pelvis - seat target [m]
+  double PelvisSeatDistance() const;                      // 3-D distance pelvis - seat target [m]
   const Contacts& contacts() const { return contacts_; }  // current (not lagged)
   Eigen::Vector3d SeatTargetWorld() const { return world_->SeatTargetWorld(); }
   // Mean x, y of the non-root bodies; z of the torso (authors' body_xyz, notes 1.5).
@@ -134,6 +138,7 @@ class HumanoidChairEnv : public Env {
   std::vector<Eigen::Vector3d> body_pos_;
   Contacts contacts_;
   std::array<bool, 2> foot_flags_{};
+  std::array<bool, 2> shown_flags_{};  // the flags in the last observation written
   int step_ = 0;
   Eigen::Vector2d walk_target_ = Eigen::Vector2d::Zero();
   std::array<double, HumanoidModel::kNumJoints> tau_{};

@@ -2,6 +2,7 @@
 
 #include "common/paths.h"
 #include "envs/chair.h"
+#include "tasks/hierarchy.h"
 #include "tasks/sit.h"
 #include "tasks/state_bank.h"
 #include "tasks/task_env.h"
@@ -122,9 +123,31 @@ TaskDef SitDef() {
   return d;
 }
 
+TaskDef SitChairDef() {
+  TaskDef d;
+  d.name = "sit_chair";
+  d.description =
+      "sit_chair: the main task, sit down from a spawn zone around the chair (the meta "
+      "controller's env; no single-policy evaluation: perch eval --task chain)";
+  d.obs_layout = ObsLayout::kProprioChair;
+  d.needs_chair = true;
+  d.read = [](const Json* j, const std::string& ctx, TaskEnvConfig* c) {
+    c->section = std::make_shared<TaskSectionOf<SitChairTaskConfig>>(
+        SitChairTaskConfig::FromJson(j != nullptr ? *j : Json::object(), ctx));
+  };
+  d.write = [](const TaskEnvConfig& c) { return c.Section<SitChairTaskConfig>().ToJson(); };
+  d.check = [](const TaskEnvConfig& c, const std::string& ctx) {
+    CheckBanks(c.Section<SitChairTaskConfig>().start, c, ctx + ".sit_chair");
+  };
+  d.make = [](const TaskEnvConfig& c) -> std::unique_ptr<Task> {
+    return std::make_unique<SitChairTask>(c.Section<SitChairTaskConfig>(), c.control_dt());
+  };
+  return d;
+}
+
 const std::vector<TaskDef>& Registry() {
   static const std::vector<TaskDef> tasks = {WalkDef(), TurnDef("turn_left"), TurnDef("turn_right"),
-                                             SitDef()};
+                                             SitDef(), SitChairDef()};
   return tasks;
 }
 

@@ -31,7 +31,7 @@ class Canvas {
     FillCapsule(a, b, 0.5, c);
   }
   // Draws `text` with a 3x5-pixel font magnified `scale` times, top-left at (x, y). Knows digits,
-  // lower-case letters, space and . : - = % / ( ); other characters are drawn as a box.
+  // lower-case letters, space and . : - _ = % / ( ); other characters are drawn as a box.
   void DrawText(int x, int y, const std::string& text, Rgb c, int scale = 2);
   static int TextWidth(const std::string& text, int scale = 2) {
     return static_cast<int>(text.size()) * 4 * scale - scale;

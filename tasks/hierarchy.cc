@@ -1,0 +1,242 @@
+#include "tasks/hierarchy.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "envs/spawn.h"
+#include "tasks/imitation.h"
+#include "tasks/task_eval.h"
+
+namespace perch {
+
+const char* SubtaskName(int id) {
+  switch (id) {
+    case kLeftTurn:
+      return "turn_left";
+    case kRightTurn:
+      return "turn_right";
+    case kSit:
+      return "sit";
+    case kWalk:
+      return "walk";
+  }
+  return "?";
+}
+
+SitChairTaskConfig SitChairTaskConfig::FromJson(const Json& j, const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
+  CheckKnownKeys(j,
+                 {"support_reward", "approach_weight", "min_root_z", "sit_min_root_z",
+                  "max_episode_steps", "start", "success_contact_s"},
+                 ctx);
+  SitChairTaskConfig c;
+  GetOptional(j, "support_reward", c.support_reward, ctx);
+  GetOptional(j, "approach_weight", c.approach_weight, ctx);
+  GetOptional(j, "min_root_z", c.min_root_z, ctx);
+  GetOptional(j, "sit_min_root_z", c.sit_min_root_z, ctx);
+  GetOptional(j, "max_episode_steps", c.max_episode_steps, ctx);
+  if (j.contains("start")) c.start = BankStartConfig::FromJson(j["start"], ctx + ".start");
+  GetOptional(j, "success_contact_s", c.success_contact_s, ctx);
+  if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
+  if (!(c.success_contact_s > 0)) throw ConfigError(ctx + ".success_contact_s: must be > 0");
+  return c;
+}
+
+Json SitChairTaskConfig::ToJson() const {
+  return Json{{"support_reward", support_reward},
+              {"approach_weight", approach_weight},
+              {"min_root_z", min_root_z},
+              {"sit_min_root_z", sit_min_root_z},
+              {"max_episode_steps", max_episode_steps},
+              {"start", start.ToJson()},
+              {"success_contact_s", success_contact_s}};
+}
+
+SitChairTask::SitChairTask(const SitChairTaskConfig& c, double control_dt)
+    : c_(c), dt_(control_dt) {}
+
+bool SitChairTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) {
+  const SpawnPose spawn = SampleSpawn(env.config().spawn, rng);
+  spawn_theta_ = spawn.theta;
+  if (c_.start.banks.empty()) return false;  // the env's own spawn of its init pose
+  if (!bank_) bank_ = LoadStartBanks(c_.start.banks, env.model());
+  HumanoidState h = HumanoidStateOf(bank_->states[rng.UniformInt(bank_->states.size())]);
+  // Heading 0 first, so that PlaceAtSpawn's yaw_added (theta + pi) faces the zone's centre.
+  h = TransformHorizontally(h, -RpyFromQuat(h.root_quat).z(), 0.0, 0.0);
+  *s = PlaceAtSpawn(h, spawn, env.config().chair_placement);
+  return true;
+}
+
+void SitChairTask::OnReset(HumanoidChairEnv& env, Rng& rng) {
+  active_ = kWalk;
+  prev_distance_ = env.PelvisSeatDistance();
+  // At reset the walk target is the chair's origin until the first meta decision (notes 4.7).
+  env.SetWalkTarget(env.SeatTargetWorld().head<2>());
+}
+
+TaskStep SitChairTask::OnStep(const HumanoidChairEnv& env, const float* action) {
+  const double d = env.PelvisSeatDistance();
+  TaskStep r;
+  r.reward = static_cast<float>(env.PelvisSeatContact()
+                                    ? c_.support_reward
+                                    : ApproachReward(prev_distance_, d, dt_, c_.approach_weight));
+  prev_distance_ = d;
+  const double min_z = active_ == kSit ? c_.sit_min_root_z : c_.min_root_z;
+  r.terminated = env.humanoid_state().root_pos.z() < min_z;
+  return r;
+}
+
+Json SitChairTask::SaveMemory() const {
+  return Json{
+      {"active", active_}, {"prev_distance", prev_distance_}, {"spawn_theta", spawn_theta_}};
+}
+
+void SitChairTask::LoadMemory(const Json& j) {
+  GetRequired(j, "active", active_, "sit_chair task memory");
+  GetRequired(j, "prev_distance", prev_distance_, "sit_chair task memory");
+  GetRequired(j, "spawn_theta", spawn_theta_, "sit_chair task memory");
+}
+
+// ---- subtask policies -------------------------------------------------------------------------
+
+ObsLayout SubtaskPolicies::Layout(int id) {
+  return id == kWalk  ? ObsLayout::kProprioGoal
+         : id == kSit ? ObsLayout::kProprioChair
+                      : ObsLayout::kProprio;
+}
+
+SubtaskPolicies::SubtaskPolicies(const std::array<proto::ModelWeights, kNumSubtasks>& models,
+                                 const std::array<std::string, kNumSubtasks>& names) {
+  for (int id = 0; id < kNumSubtasks; ++id) {
+    const std::string ctx = std::string(SubtaskName(id)) + " policy " + names[id];
+    const PolicyConfig pc = PolicyConfigFromShape(models[id].shape(), ctx);
+    const int want = ObsLayoutDim(Layout(id));
+    if (pc.kind != PolicyKind::kGaussian || pc.obs_dim != want || pc.act_dim != 21) {
+      throw ConfigError(ctx + ": observes " + std::to_string(pc.obs_dim) + " and acts " +
+                        std::to_string(pc.act_dim) + ", the " + SubtaskName(id) +
+                        " subtask needs a gaussian policy over " + std::to_string(want) +
+                        " observations and 21 torques");
+    }
+    runners_[id] = std::make_unique<PolicyRunner>(pc, NormalizerConfig());
+    runners_[id]->LoadWeights(models[id]);
+    runners_[id]->set_update_obs_stats(
+        false);  // frozen normalisers (notes 9.5: the cleaner choice)
+  }
+  obs_.resize(57);
+}
+
+void SubtaskPolicies::Act(int id, const HumanoidChairEnv& env, Rng& rng, bool deterministic,
+                          float* action) {
+  env.WriteObservation(Layout(id), obs_.data());
+  runners_[id]->Act(obs_.data(), rng, deterministic, nullptr, action);
+}
+
+// ---- the scripted chain ------------------------------------------------------------------------
+
+Json EvaluateChain(const TaskEnvConfig& config,
+                   const std::array<proto::ModelWeights, kNumSubtasks>& models,
+                   const std::array<std::string, kNumSubtasks>& paths, const ChainOptions& o,
+                   std::vector<PoseFrame>* frames) {
+  if (config.env.task != "sit_chair") {
+    throw ConfigError("chain: needs the sit_chair env task, got \"" + config.env.task + "\"");
+  }
+  SubtaskPolicies policies(models, paths);
+  std::unique_ptr<HumanoidChairEnv> env = MakeTaskHumanoidEnv(config);
+  auto& task = const_cast<SitChairTask&>(dynamic_cast<const SitChairTask&>(env->task()));
+  const double dt = env->spec().control_dt;
+  const int max_steps = env->spec().max_episode_steps;
+  const int need = static_cast<int>(std::ceil(task.config().success_contact_s / dt - 1e-9));
+  const double chair_yaw = config.env.chair_placement.yaw;
+  const Eigen::Vector2d facing(std::cos(chair_yaw), std::sin(chair_yaw));
+  std::vector<float> obs(env->spec().obs_dim), action(21);
+  int successes = 0, falls = 0, left_turns = 0, right_turns = 0, sits = 0;
+  std::vector<double> min_dists, sit_times;
+  for (int e = 0; e < o.episodes; ++e) {
+    const uint64_t episode_seed = o.seed * 1000003ULL + static_cast<uint64_t>(e);
+    env->Seed(2 * episode_seed);
+    Rng act_rng(2 * episode_seed + 1);
+    env->Reset(obs.data());
+    const Eigen::Vector2d target = env->SeatTargetWorld().head<2>() + o.approach_dist_m * facing;
+    env->SetWalkTarget(target);
+    int phase = kWalk, phase_start = 0, run = 0;
+    double min_dist = env->PelvisSeatDistance();
+    bool success = false, fell = false;
+    for (int k = 0; k < max_steps; ++k) {
+      // Fixed switching rules (docs/subtasks.md "The scripted chain").
+      if (phase == kWalk) {
+        const bool reached = (env->BodyXyz().head<2>() - target).norm() < o.reach_m;
+        if (reached || (k - phase_start) * dt >= o.max_walk_s) {
+          // Turn towards the chair's facing direction the short way round.
+          const double err = AngleDiff(chair_yaw, env->RootRpy().z());
+          phase = err >= 0 ? kLeftTurn : kRightTurn;
+          (phase == kLeftTurn ? left_turns : right_turns) += 1;
+          phase_start = k;
+        }
+      } else if (phase != kSit && (k - phase_start) * dt >= o.turn_s) {
+        phase = kSit;
+        ++sits;
+        phase_start = k;
+      }
+      task.set_active(phase);
+      if (e == 0 && frames != nullptr) {
+        const HumanoidState& s = env->humanoid_state();
+        PoseFrame f;
+        f.root_pos = s.root_pos;
+        f.root_quat = s.root_quat;
+        f.q.assign(s.q.begin(), s.q.end());
+        f.time_s = k * dt;
+        f.label = SubtaskName(phase);
+        frames->push_back(f);
+      }
+      policies.Act(phase, *env, act_rng, !o.stochastic, action.data());
+      const StepResult r = env->Step(action.data(), obs.data());
+      min_dist = std::min(min_dist, env->PelvisSeatDistance());
+      run = env->PelvisSeatContact() ? run + 1 : 0;
+      if (!success && run >= need) {
+        success = true;
+        sit_times.push_back((k + 1) * dt);
+      }
+      if (r.terminated) {
+        fell = true;
+        break;
+      }
+    }
+    successes += success;
+    falls += fell;
+    min_dists.push_back(min_dist);
+  }
+  const double n = o.episodes;
+  double mean = 0, var = 0;
+  for (double d : min_dists) mean += d / n;
+  for (double d : min_dists) var += (d - mean) * (d - mean) / n;
+  double sit_mean = 0;
+  for (double t : sit_times) sit_mean += t / std::max<size_t>(1, sit_times.size());
+  const auto ci = WilsonInterval95(successes, o.episodes);
+  return Json{{"task", "chain"},
+              {"zone", config.env.spawn.zone},
+              {"chair", config.env.chair},
+              {"episodes", o.episodes},
+              {"seed", o.seed},
+              {"stochastic", o.stochastic},
+              {"success_rate", successes / n},
+              {"success_ci95", {ci[0], ci[1]}},
+              {"min_dist_mean_m", mean},
+              {"min_dist_std_m", std::sqrt(var)},
+              {"fall_rate", falls / n},
+              {"left_turns", left_turns},
+              {"right_turns", right_turns},
+              {"reached_sit", sits},
+              {"time_to_success_s_mean", sit_mean},
+              {"models",
+               {{"walk", paths[kWalk]},
+                {"turn_left", paths[kLeftTurn]},
+                {"turn_right", paths[kRightTurn]},
+                {"sit", paths[kSit]}}},
+              {"rules",
+               {{"approach_dist_m", o.approach_dist_m},
+                {"reach_m", o.reach_m},
+                {"max_walk_s", o.max_walk_s},
+                {"turn_s", o.turn_s}}}};
+}
+
+}  // namespace perch

@@ -1,0 +1,107 @@
+// The main task and the hierarchy's lower level on one humanoid env (paper Sec. 3, 5; notes 4.7):
+//  * SitChairTask ("sit_chair"): spawn in a zone around the chair from a walking pose, Eq. 8
+//    reward per control step, termination at root < 0.78 m (< 0.54 m while sit is active), the
+//    authors' 990-step episode. The env task of the meta controller and of the scripted chain.
+//  * SubtaskPolicies: the four frozen subtask policies, each with its own frozen normaliser, run
+//    on their own observation layouts of the same env (walk 52, turns 50, sit 57).
+//  * The scripted chain (issue 14): walk to a point in front of the seat, turn to the side that
+//    faces away from the chair, sit; no meta policy. The floor the meta controller must beat.
+#pragma once
+
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/json_util.h"
+#include "common/proto/model.pb.h"
+#include "envs/humanoid_env.h"
+#include "learner/policy.h"
+#include "tasks/clip_task.h"
+#include "tasks/task_env.h"
+#include "viz/filmstrip.h"
+
+namespace perch {
+
+// The authors' subtask indices of the meta switch (alphabetical keys, notes 4.7).
+enum SubtaskId { kLeftTurn = 0, kRightTurn = 1, kSit = 2, kWalk = 3, kNumSubtasks = 4 };
+const char* SubtaskName(int id);  // "turn_left", "turn_right", "sit", "walk"
+
+struct SitChairTaskConfig {
+  // Eq. 8: `support_reward` while the pelvis is on the seat, else approach_weight x (-V_sit).
+  // Paper 1.0; the authors' code 5.0 (notes 3.3).
+  double support_reward = 1.0;
+  double approach_weight = 0.5;
+  double min_root_z = 0.78;      // [m]
+  double sit_min_root_z = 0.54;  // while the sit subtask is active [m]
+  int max_episode_steps = 990;   // 33 meta steps of 30 control steps (notes 4.1)
+  // The start pose: a random state of these banks (walking mid-stride), its yaw turned to face
+  // the spawn zone's centre, placed at the spawn (env.spawn). Empty: the env's init pose.
+  BankStartConfig start{{"data/banks/walk_end_poses.bin"}, 1.0};
+  double success_contact_s = 3.0;  // paper Sec. 7
+
+  static SitChairTaskConfig FromJson(const Json& j, const std::string& ctx);
+  Json ToJson() const;
+};
+
+class SitChairTask : public Task {
+ public:
+  explicit SitChairTask(const SitChairTaskConfig& c, double control_dt);
+  const char* name() const override { return "sit_chair"; }
+  int max_episode_steps() const override { return c_.max_episode_steps; }
+  bool InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) override;
+  void OnReset(HumanoidChairEnv& env, Rng& rng) override;
+  TaskStep OnStep(const HumanoidChairEnv& env, const float* action) override;
+  Json SaveMemory() const override;
+  void LoadMemory(const Json& j) override;
+
+  // The subtask acting now (the termination height depends on it).
+  void set_active(int subtask) { active_ = subtask; }
+  int active() const { return active_; }
+  const SitChairTaskConfig& config() const { return c_; }
+  double spawn_theta() const { return spawn_theta_; }  // azimuth of this episode's spawn [rad]
+
+ private:
+  SitChairTaskConfig c_;
+  double dt_;
+  std::shared_ptr<const StartBank> bank_;
+  int active_ = kWalk;
+  double prev_distance_ = 0.0;
+  double spawn_theta_ = 0.0;
+};
+
+// Four frozen subtask policies over one env.
+class SubtaskPolicies {
+ public:
+  // models in SubtaskId order; each must observe its layout (ConfigError naming the subtask and
+  // the file otherwise).
+  SubtaskPolicies(const std::array<proto::ModelWeights, kNumSubtasks>& models,
+                  const std::array<std::string, kNumSubtasks>& names_for_errors);
+  // The action of subtask `id` on the env's current state (its own observation and normaliser).
+  void Act(int id, const HumanoidChairEnv& env, Rng& rng, bool deterministic, float* action);
+  static ObsLayout Layout(int id);
+
+ private:
+  std::array<std::unique_ptr<PolicyRunner>, kNumSubtasks> runners_;
+  std::vector<float> obs_;
+};
+
+struct ChainOptions {
+  int episodes = 100;
+  uint64_t seed = 0;
+  bool stochastic = false;
+  double approach_dist_m = 0.6;  // walk target: this far in front of the seat target
+  double reach_m = 0.25;         // walk -> turn when body_xyz is this close to the target
+  double max_walk_s = 8.0;       // walk -> turn at the latest
+  double turn_s = 3.2;           // turn -> sit after this long (the turn clips last 2.9 s)
+};
+
+// Runs the chain over seeded episodes; JSON: success_rate, success_ci95, min_dist_mean_m,
+// min_dist_std_m, fall_rate, turn choices, time to sit, ... Episode 0's frames (labelled with the
+// active subtask) go to `frames` when not null.
+Json EvaluateChain(const TaskEnvConfig& config,
+                   const std::array<proto::ModelWeights, kNumSubtasks>& models,
+                   const std::array<std::string, kNumSubtasks>& model_paths, const ChainOptions& o,
+                   std::vector<PoseFrame>* frames);
+
+}  // namespace perch

@@ -1,0 +1,116 @@
+#include "tasks/hierarchy.h"
+
+#include <gtest/gtest.h>
+
+#include "learner/ppo.h"
+
+namespace perch {
+namespace {
+
+proto::ModelWeights Untrained(int obs_dim, uint64_t seed) {
+  PpoLearner learner(PolicyConfig::Subtask(obs_dim), PpoConfig::Subtask(), seed);
+  proto::ModelWeights w;
+  learner.ExportWeights(&w);
+  return w;
+}
+
+std::array<proto::ModelWeights, kNumSubtasks> UntrainedSet() {
+  std::array<proto::ModelWeights, kNumSubtasks> m;
+  for (int id = 0; id < kNumSubtasks; ++id) {
+    m[id] = Untrained(ObsLayoutDim(SubtaskPolicies::Layout(id)), id + 1);
+  }
+  return m;
+}
+
+TaskEnvConfig SitChair(int zone) {
+  return TaskEnvConfig::FromJson({{"task", "sit_chair"}, {"spawn", {{"zone", zone}}}}, "t");
+}
+
+TEST(Hierarchy, EveryLayoutOfOneEnvAgreesWithWhatTheEnvWrote) {
+  auto env = MakeTaskHumanoidEnv(SitChair(1));
+  std::vector<float> obs(57), other(57), act(21, 0.1f);
+  env->Seed(3);
+  env->Reset(obs.data());
+  for (int k = 0; k < 5; ++k) env->Step(act.data(), obs.data());
+  env->WriteObservation(ObsLayout::kProprioChair, other.data());
+  for (int i = 0; i < 57; ++i) EXPECT_EQ(other[i], obs[i]) << i;  // the env's own layout
+  env->WriteObservation(ObsLayout::kProprioGoal, other.data());
+  for (int i = 0; i < 50; ++i) EXPECT_EQ(other[i], obs[i]) << i;  // shared proprioception
+  // The goal feature points at the walk target.
+  const Eigen::Vector2d to = env->walk_target() - env->BodyXyz().head<2>();
+  const double psi = std::atan2(to.y(), to.x()) - env->RootRpy().z();
+  EXPECT_NEAR(other[50], std::sin(psi), 1e-5);
+  EXPECT_NEAR(other[51], std::cos(psi), 1e-5);
+}
+
+TEST(Hierarchy, SpawnsWalkingInTheZoneFacingItsCentre) {
+  for (int zone : {1, 3}) {
+    auto env = MakeTaskHumanoidEnv(SitChair(zone));
+    const auto& task = dynamic_cast<const SitChairTask&>(env->task());
+    std::vector<float> obs(57);
+    for (int seed = 0; seed < 5; ++seed) {
+      env->Seed(seed);
+      env->Reset(obs.data());
+      const double theta = task.spawn_theta();
+      const auto& r = zone == 1 ? env->config().spawn.zone1_deg : env->config().spawn.zone3_deg;
+      EXPECT_GE(std::abs(theta) * 180 / M_PI, r[0] - 1e-9);
+      EXPECT_LE(std::abs(theta) * 180 / M_PI, r[1] + 1e-9);
+      const Eigen::Vector2d c(env->config().spawn.center_x, env->config().spawn.center_y);
+      const Eigen::Vector2d p = env->humanoid_state().root_pos.head<2>();
+      EXPECT_NEAR((p - c).norm(), env->config().spawn.radius, 1e-6);
+      const double to_centre = std::atan2(c.y() - p.y(), c.x() - p.x());
+      EXPECT_NEAR(AngleDiff(env->RootRpy().z(), to_centre), 0.0, 1e-6);
+      EXPECT_GT(env->humanoid_state().root_lin_vel.norm(), 0.3);  // mid-stride, walking
+    }
+  }
+}
+
+TEST(Hierarchy, TerminationHeightFollowsTheActiveSubtask) {
+  // The walking start (root about 1.2 m) is above 0.78 m; a sit threshold set above it ends the
+  // episode only while sit is the active subtask.
+  auto env = MakeTaskHumanoidEnv(TaskEnvConfig::FromJson(
+      {{"task", "sit_chair"}, {"spawn", {{"zone", 1}}}, {"sit_chair", {{"sit_min_root_z", 1.5}}}},
+      "t"));
+  auto& task = const_cast<SitChairTask&>(dynamic_cast<const SitChairTask&>(env->task()));
+  std::vector<float> obs(57), zero(21, 0.0f);
+  for (int active : {kWalk, kSit}) {
+    env->Seed(1);
+    env->Reset(obs.data());
+    task.set_active(active);
+    EXPECT_EQ(env->Step(zero.data(), obs.data()).terminated, active == kSit) << active;
+  }
+  EXPECT_EQ(SitChairTaskConfig().min_root_z, 0.78);
+  EXPECT_EQ(SitChairTaskConfig().sit_min_root_z, 0.54);
+}
+
+TEST(Hierarchy, SubtaskPoliciesRefuseAModelOfAnotherObservationByName) {
+  auto models = UntrainedSet();
+  models[kSit] = Untrained(52, 9);
+  try {
+    SubtaskPolicies p(models, {"a.bin", "b.bin", "sit.bin", "w.bin"});
+    ADD_FAILURE() << "accepted";
+  } catch (const ConfigError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("sit policy sit.bin"), std::string::npos) << m;
+    EXPECT_NE(m.find("57"), std::string::npos) << m;
+  }
+}
+
+TEST(Hierarchy, ScriptedChainIsReproducibleAndUntrainedSubtasksNeverSit) {
+  ChainOptions o;
+  o.episodes = 2;
+  o.seed = 5;
+  std::vector<PoseFrame> frames;
+  const auto models = UntrainedSet();
+  const std::array<std::string, kNumSubtasks> names = {"l", "r", "s", "w"};
+  const Json a = EvaluateChain(SitChair(1), models, names, o, &frames);
+  const Json b = EvaluateChain(SitChair(1), models, names, o, nullptr);
+  EXPECT_EQ(a.dump(), b.dump());
+  EXPECT_EQ(a["success_rate"].get<double>(), 0.0);
+  EXPECT_GT(a["min_dist_mean_m"].get<double>(), 0.3);
+  ASSERT_FALSE(frames.empty());
+  EXPECT_EQ(frames.front().label, "walk");
+}
+
+}  // namespace
+}  // namespace perch
