@@ -128,6 +128,9 @@ TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_p
   if (task == "turn_left" || task == "turn_right" || task == "sit") {
     sec["start_joint_noise_rad"] = o.start_noise;
   }
+  if ((task == "turn_left" || task == "turn_right") && o.start != "reference") {
+    sec["rsi_prob"] = 0.0;  // evaluation starts turns at frame 0 (Table 4)
+  }
   if (o.start == "end-poses") {
     if (o.banks.empty()) throw ConfigError("--start end-poses: needs --bank FILE");
     if (task != "turn_left" && task != "turn_right" && task != "sit") {

@@ -37,7 +37,7 @@ TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
       j,
       {"reward_variant", "motion_file", "similarity", "rot_weight", "rot_alpha", "root_vel_weight",
        "root_vel_alpha", "hold_phase", "hold_pose_weight", "hold_energy_weight", "energy",
-       "yaw_offset_max_deg", "min_root_z", "max_yaw_error_deg", "max_episode_steps",
+       "yaw_offset_max_deg", "rsi_prob", "rsi_max_fraction", "min_root_z", "max_yaw_error_deg", "max_episode_steps",
        "start_joint_noise_rad", "success_after_end_s", "success_yaw_tol_deg", "start"},
       ctx);
   TurnTaskConfig c;
@@ -59,6 +59,12 @@ TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
   GetOptional(j, "hold_energy_weight", c.hold_energy_weight, ctx);
   if (j.contains("energy")) c.energy = EnergyCostConfig::FromJson(j["energy"], ctx + ".energy");
   GetOptional(j, "yaw_offset_max_deg", c.yaw_offset_max_deg, ctx);
+  GetOptional(j, "rsi_prob", c.rsi_prob, ctx);
+  GetOptional(j, "rsi_max_fraction", c.rsi_max_fraction, ctx);
+  if (!(c.rsi_prob >= 0 && c.rsi_prob <= 1)) throw ConfigError(ctx + ".rsi_prob: must be in [0, 1]");
+  if (!(c.rsi_max_fraction >= 0 && c.rsi_max_fraction <= 1)) {
+    throw ConfigError(ctx + ".rsi_max_fraction: must be in [0, 1]");
+  }
   GetOptional(j, "min_root_z", c.min_root_z, ctx);
   GetOptional(j, "max_yaw_error_deg", c.max_yaw_error_deg, ctx);
   GetOptional(j, "max_episode_steps", c.max_episode_steps, ctx);
@@ -98,6 +104,8 @@ Json TurnTaskConfig::ToJson() const {
               {"hold_energy_weight", hold_energy_weight},
               {"energy", energy.ToJson()},
               {"yaw_offset_max_deg", yaw_offset_max_deg},
+              {"rsi_prob", rsi_prob},
+              {"rsi_max_fraction", rsi_max_fraction},
               {"min_root_z", min_root_z},
               {"max_yaw_error_deg", max_yaw_error_deg},
               {"max_episode_steps", max_episode_steps},
@@ -125,7 +133,13 @@ bool TurnTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState
       Eigen::AngleAxisd(m_.placement.yaw, Eigen::Vector3d::UnitZ()) * m_.placement.offset;
   m_.t0 = 0.0;
   *s = StartState(m_.placement, 0.0, false);
-  BankStart(c_.start, env, rng, RpyFromQuat(s->root_quat).z(), s->root_pos.head<2>(), s);
+  // A bank start replaces frame 0; otherwise maybe a reference state initialisation (the coin
+  // is only tossed when RSI is on, so other runs keep their random streams).
+  if (!BankStart(c_.start, env, rng, RpyFromQuat(s->root_quat).z(), s->root_pos.head<2>(), s) &&
+      c_.rsi_prob > 0 && rng.Uniform(0.0, 1.0) < c_.rsi_prob) {
+    m_.t0 = rng.Uniform(0.0, c_.rsi_max_fraction * motion_.duration());
+    *s = StartState(m_.placement, m_.t0, false);
+  }
   PerturbJoints(c_.start_joint_noise_rad, env, rng, s);
   return true;
 }

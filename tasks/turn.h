@@ -30,6 +30,11 @@ struct TurnTaskConfig {
   double hold_energy_weight = 0.5;
   EnergyCostConfig energy;
   double yaw_offset_max_deg = 180.0;  // yaw offset ~ U(-max, max) per episode (notes 4.3)
+  // Reference state initialisation (ours for turns; the paper starts turns at frame 0): with
+  // probability rsi_prob an episode starts at t0 ~ U(0, rsi_max_fraction x clip) with the clip's
+  // velocities there. Training only: perch eval starts at frame 0.
+  double rsi_prob = 0.0;
+  double rsi_max_fraction = 0.9;
   double min_root_z = 0.78;           // early termination [m]
   double max_yaw_error_deg = 45.0;    // early termination: |yaw - reference yaw| above [deg]
   int max_episode_steps = 300;

@@ -185,3 +185,35 @@ TEST(TurnTask, StartJointNoiseMakesDistinctTrialsWithinItsBound) {
 
 }  // namespace
 }  // namespace perch
+
+namespace perch {
+namespace {
+
+TEST(TurnTask, ReferenceStateInitialisationStartsAlongTheClipWithItsVelocities) {
+  auto env = MakeTurnEnv("turn_left", Json{{"rsi_prob", 1.0}, {"yaw_offset_max_deg", 0.0}});
+  const TurnTask& t = TaskOf(*env);
+  std::vector<float> obs(50);
+  double hi = 0;
+  for (int seed = 0; seed < 10; ++seed) {
+    env->Seed(seed);
+    env->Reset(obs.data());
+    const double t0 = t.start_time();
+    EXPECT_LE(t0, 0.9 * t.motion().duration() + 1e-9);
+    hi = std::max(hi, t0);
+    const MotionPose ref = t.motion().At(t0);
+    for (int j = 0; j < 21; ++j) {
+      EXPECT_NEAR(env->humanoid_state().q[j], ref.q[j], 1e-6);
+      EXPECT_NEAR(env->humanoid_state().qd[j], ref.qdot[j], 1e-6);
+    }
+    // The success step moves with the start: always clip end + 0.5 s of episode time.
+    EXPECT_EQ(t.SuccessStep(), t.ClipEndStep() + 30);
+  }
+  EXPECT_GT(hi, 1.0);
+  auto off = MakeTurnEnv("turn_left");
+  off->Seed(2);
+  off->Reset(obs.data());
+  EXPECT_EQ(TaskOf(*off).start_time(), 0.0);
+}
+
+}  // namespace
+}  // namespace perch
