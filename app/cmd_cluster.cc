@@ -8,6 +8,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -277,17 +278,9 @@ int RunTrain(TrainFlags f) {
   return exit_code;
 }
 
-// ---- perch bench cluster ----
-struct BenchFlags {
-  std::string config = std::string(PERCH_SOURCE_DIR) + "/configs/default.json";
-  int actors = 0;  // 0: one per core
-  int envs = 0;
-  double env_seconds = 5.0;
-  double cluster_seconds = 30.0;
-  bool json = false;
-};
+// ---- cluster runs for the benchmarks ----
 
-// utime + stime of a live process, in seconds (/proc/PID/stat fields 14 and 15).
+// utime + stime of a live (or not yet reaped) process, in seconds (/proc/PID/stat fields 14, 15).
 double ProcessCpuSeconds(pid_t pid) {
   std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
   std::string stat((std::istreambuf_iterator<char>(in)), {});
@@ -308,6 +301,148 @@ double ThreadCpuSeconds() {
   ::clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
   return ts.tv_sec + 1e-9 * ts.tv_nsec;
 }
+
+std::vector<Json> ReadMetricsRows(const std::string& run_dir) {
+  std::ifstream in(run_dir + "/metrics.jsonl");
+  std::vector<Json> rows;
+  for (std::string line; std::getline(in, line);) {
+    if (!line.empty()) rows.push_back(Json::parse(line));
+  }
+  return rows;
+}
+
+struct ClusterRunOptions {
+  std::string exe;  // the perch program run as learner and actors
+  std::string config;
+  int actors = 2;
+  int envs = 4;
+  double seconds = 0.0;     // stop after this long (0: no limit)
+  int64_t max_updates = 0;  // the learner stops after this many updates (0: no limit)
+  double timeout_s = 900.0;
+  std::string dir;  // run dir and logs go here
+};
+
+// One learner + actors on loopback. CPU time of every process is sampled whenever an update lands,
+// so that samples and CPU are measured over the same steady-state window: from the first update
+// (start-up and the first batch excluded) to the last.
+struct ClusterRun {
+  std::vector<Json> rows;                     // metrics.jsonl
+  std::vector<double> cpu_at_update;          // [update] CPU s of the learner and all actors
+  std::vector<double> learner_cpu_at_update;  // [update] CPU s of the learner
+  double wall_s = 0.0;
+
+  bool ok() const { return rows.size() >= 3; }
+  double Samples() const {
+    return rows.back()["samples"].get<double>() - rows.front()["samples"].get<double>();
+  }
+  double Seconds() const {
+    return rows.back()["time_s"].get<double>() - rows.front()["time_s"].get<double>();
+  }
+  double Cpu() const { return cpu_at_update[rows.size() - 1] - cpu_at_update[0]; }
+  double LearnerCpu() const {
+    return learner_cpu_at_update[rows.size() - 1] - learner_cpu_at_update[0];
+  }
+};
+
+ClusterRun RunCluster(const ClusterRunOptions& o) {
+  const std::string run_dir = o.dir + "/run";
+  const int rp = PickFreePort(), wp = PickFreePort();
+  std::vector<std::string> largv = {o.exe,
+                                    "learner",
+                                    "--config",
+                                    o.config,
+                                    "--run-dir",
+                                    run_dir,
+                                    "--rollout-bind",
+                                    "tcp://127.0.0.1:" + std::to_string(rp),
+                                    "--weights-bind",
+                                    "tcp://127.0.0.1:" + std::to_string(wp),
+                                    "--metrics-port",
+                                    std::to_string(PickFreePort())};
+  if (o.max_updates > 0) {
+    largv.push_back("--max-updates");
+    largv.push_back(std::to_string(o.max_updates));
+  }
+  const double t0 = MonotonicSeconds();
+  pid_t learner = Spawn(largv, o.dir + "/learner.log");
+  std::vector<pid_t> pids;
+  for (int i = 0; i < o.actors; ++i) {
+    pids.push_back(
+        Spawn({o.exe, "actor", "--config", o.config, "--learner-host", "127.0.0.1",
+               "--rollout-port", std::to_string(rp), "--weights-port", std::to_string(wp),
+               "--actor-id", std::to_string(i), "--envs", std::to_string(o.envs)},
+              o.dir + "/actor-" + std::to_string(i) + ".log"));
+  }
+  ClusterRun r;
+  size_t seen = 0;
+  while (!g_stop.load()) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    std::ifstream mf(run_dir + "/metrics.jsonl");
+    size_t lines = 0;
+    for (std::string line; std::getline(mf, line);) lines += !line.empty();
+    if (lines > seen) {
+      // An exited learner is not reaped yet, so its /proc entry still holds its CPU time.
+      const double lcpu = ProcessCpuSeconds(learner);
+      double cpu = lcpu;
+      for (pid_t p : pids) cpu += ProcessCpuSeconds(p);
+      for (; seen < lines; ++seen) {
+        r.cpu_at_update.push_back(cpu);
+        r.learner_cpu_at_update.push_back(lcpu);
+      }
+    }
+    const double t = MonotonicSeconds() - t0;
+    if (o.max_updates > 0 && seen >= static_cast<size_t>(o.max_updates)) break;
+    if ((o.seconds > 0 && t >= o.seconds) || t >= o.timeout_s) break;
+    int status = 0;
+    if (::waitpid(learner, &status, WNOHANG) == learner) {
+      spdlog::warn("bench: learner {} (log {}/learner.log)", DescribeStatus(status), o.dir);
+      learner = -1;
+      break;
+    }
+  }
+  r.wall_s = MonotonicSeconds() - t0;
+  for (pid_t p : pids) ::kill(p, SIGTERM);
+  for (pid_t p : pids) Stop(p, 10.0);
+  if (learner > 0) Stop(learner, 30.0);
+  r.rows = ReadMetricsRows(run_dir);
+  // Updates that landed after the last poll have no CPU reading: leave them out.
+  if (r.rows.size() > r.cpu_at_update.size()) r.rows.resize(r.cpu_at_update.size());
+  return r;
+}
+
+std::string MakeTempDir() {
+  char tmpl[] = "/tmp/perch-bench-XXXXXX";
+  const char* dir = ::mkdtemp(tmpl);
+  if (dir == nullptr) throw std::runtime_error("mkdtemp failed");
+  return dir;
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// min, median, max of the repeats: one noisy reading shows as a wide spread.
+Json Spread(const std::vector<double>& v) {
+  if (v.empty()) return nullptr;
+  return Json{{"runs", v},
+              {"median", Median(v)},
+              {"min", *std::min_element(v.begin(), v.end())},
+              {"max", *std::max_element(v.begin(), v.end())}};
+}
+
+// ---- perch bench cluster ----
+struct BenchFlags {
+  std::string config = std::string(PERCH_SOURCE_DIR) + "/configs/default.json";
+  int actors = 0;  // 0: one per core
+  int envs = 0;
+  double env_seconds = 5.0;
+  double cluster_seconds = 20.0;
+  int repeats = 3;
+  bool json = false;
+};
 
 // Env-only baseline: one thread per actor, each stepping its envs with actions drawn as the
 // untrained policy draws them (mean ~0, sigma = exp(init_log_std), unclipped; the env clips). The
@@ -361,113 +496,241 @@ double EnvOnlySamplesPerS(const ExperimentConfig& cfg, int threads, int envs, do
 
 int RunBenchCluster(const BenchFlags& f) {
   LogToStderr("bench");
+  InstallStopHandlers();
+  if (f.repeats < 1) throw ConfigError("--repeats: must be >= 1");
   const ExperimentConfig cfg = LoadExperimentConfig(f.config);
   const int cores = std::max(1u, std::thread::hardware_concurrency());
   const int actors = f.actors > 0 ? f.actors : cores;
   const int envs = f.envs > 0 ? f.envs : cfg.cluster.envs_per_actor;
-  // The baseline runs before and after the cluster and is averaged, so that a change in the
-  // machine's load during the run (other jobs on shared cores) biases neither side.
-  spdlog::info("bench cluster: env only, {} threads x {} envs, {:.0f} s", actors, envs,
-               f.env_seconds);
-  double env_cpu_before = 0, env_cpu_after = 0;
-  const double env_before = EnvOnlySamplesPerS(cfg, actors, envs, f.env_seconds, &env_cpu_before);
-  spdlog::info("bench cluster: env only {:.0f} samples/s", env_before);
-
-  char tmpl[] = "/tmp/perch-bench-XXXXXX";
-  const char* dir = ::mkdtemp(tmpl);
-  if (dir == nullptr) throw std::runtime_error("mkdtemp failed");
-  const std::string run_dir = std::string(dir) + "/run";
-  const int rp = PickFreePort(), wp = PickFreePort();
-  const std::string exe = SelfExe();
-  pid_t learner = Spawn(
-      {exe, "learner", "--config", f.config, "--run-dir", run_dir, "--rollout-bind",
-       "tcp://127.0.0.1:" + std::to_string(rp), "--weights-bind",
-       "tcp://127.0.0.1:" + std::to_string(wp), "--metrics-port", std::to_string(PickFreePort())},
-      std::string(dir) + "/learner.log");
-  std::vector<pid_t> pids;
-  for (int i = 0; i < actors; ++i) {
-    pids.push_back(
-        Spawn({exe, "actor", "--config", f.config, "--learner-host", "127.0.0.1", "--rollout-port",
-               std::to_string(rp), "--weights-port", std::to_string(wp), "--actor-id",
-               std::to_string(i), "--envs", std::to_string(envs)},
-              std::string(dir) + "/actor-" + std::to_string(i) + ".log"));
-  }
-  spdlog::info("bench cluster: learner + {} actors x {} envs for {:.0f} s (logs in {})", actors,
-               envs, f.cluster_seconds, dir);
-  // Sample the CPU time of all cluster processes whenever an update lands, so that samples and CPU
-  // are measured over the same steady-state window (robust to other load on shared cores).
-  std::vector<double> cpu_at_update;  // [update index] summed CPU seconds of learner and actors
-  const double t_end = MonotonicSeconds() + f.cluster_seconds;
-  size_t seen = 0;
-  while (MonotonicSeconds() < t_end) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    std::ifstream mf(run_dir + "/metrics.jsonl");
-    size_t lines = 0;
-    for (std::string line; std::getline(mf, line);) lines += !line.empty();
-    if (lines > seen) {
-      double cpu = ProcessCpuSeconds(learner);
-      for (pid_t p : pids) cpu += ProcessCpuSeconds(p);
-      while (seen < lines) {
-        cpu_at_update.push_back(cpu);
-        ++seen;
-      }
+  // Env-only runs bracket every cluster run and each cluster run is compared with the mean of its
+  // two neighbours, so that a change in the machine's load (other jobs on shared cores) biases
+  // neither side; the repeats show the spread.
+  std::vector<double> env_sps, env_cpu;
+  auto env_run = [&] {
+    double per_cpu = 0.0;
+    env_sps.push_back(EnvOnlySamplesPerS(cfg, actors, envs, f.env_seconds, &per_cpu));
+    env_cpu.push_back(per_cpu);
+    spdlog::info("bench cluster: env only {:.0f} samples/s ({:.0f} per CPU s)", env_sps.back(),
+                 per_cpu);
+  };
+  spdlog::info(
+      "bench cluster: {} repeats of env only ({} threads x {} envs, {:.0f} s) and "
+      "cluster (learner + {} actors, {:.0f} s)",
+      f.repeats, actors, envs, f.env_seconds, actors, f.cluster_seconds);
+  env_run();
+  std::vector<double> ratio, ratio_cpu, cluster_sps, cluster_cpu, learner_share;
+  Json last;
+  int updates = 0;
+  for (int k = 0; k < f.repeats && !g_stop.load(); ++k) {
+    ClusterRunOptions o;
+    o.exe = SelfExe();
+    o.config = f.config;
+    o.actors = actors;
+    o.envs = envs;
+    o.seconds = f.cluster_seconds;
+    o.dir = MakeTempDir();
+    const ClusterRun run = RunCluster(o);
+    env_run();
+    updates += static_cast<int>(run.rows.size());
+    if (!run.ok()) {
+      spdlog::warn("bench cluster: repeat {}: {} updates in {:.0f} s (logs in {})", k,
+                   run.rows.size(), f.cluster_seconds, o.dir);
+      continue;
     }
+    const double sps = run.Seconds() > 0 ? run.Samples() / run.Seconds() : 0.0;
+    const double per_cpu = run.Cpu() > 0 ? run.Samples() / run.Cpu() : 0.0;
+    const double env_mean = 0.5 * (env_sps[k] + env_sps[k + 1]);
+    const double env_cpu_mean = 0.5 * (env_cpu[k] + env_cpu[k + 1]);
+    cluster_sps.push_back(sps);
+    cluster_cpu.push_back(per_cpu);
+    ratio.push_back(env_mean > 0 ? sps / env_mean : 0.0);
+    ratio_cpu.push_back(env_cpu_mean > 0 ? per_cpu / env_cpu_mean : 0.0);
+    learner_share.push_back(run.Cpu() > 0 ? run.LearnerCpu() / run.Cpu() : 0.0);
+    last = run.rows.back();
+    spdlog::info(
+        "bench cluster: repeat {}: cluster {:.0f} samples/s, ratio {:.3f} (per CPU s {:.3f}), "
+        "learner {:.1f}% of the CPU",
+        k, sps, ratio.back(), ratio_cpu.back(), 100.0 * learner_share.back());
   }
-  for (pid_t p : pids) ::kill(p, SIGTERM);
-  for (pid_t p : pids) Stop(p, 10.0);
-  Stop(learner, 30.0);
-  const double env_after = EnvOnlySamplesPerS(cfg, actors, envs, f.env_seconds, &env_cpu_after);
-  spdlog::info("bench cluster: env only (after) {:.0f} samples/s", env_after);
-  const double env_sps = 0.5 * (env_before + env_after);
-
-  // Steady state: from the first update (start-up and the first batch excluded) to the last.
-  std::ifstream in(run_dir + "/metrics.jsonl");
-  std::vector<Json> rows;
-  for (std::string line; std::getline(in, line);) {
-    if (!line.empty()) rows.push_back(Json::parse(line));
-  }
-  Json out{{"env_samples_per_s", env_sps},
-           {"env_samples_per_s_before", env_before},
-           {"env_samples_per_s_after", env_after},
+  Json out{{"env_samples_per_s", Median(env_sps)},
+           {"env_samples_per_cpu_s", Median(env_cpu)},
            {"actors", actors},
            {"envs_per_actor", envs},
            {"cores", cores},
            {"env_backend", cfg.env_backend},
-           {"updates", rows.size()},
+           {"repeats", f.repeats},
+           {"updates", updates},
+           {"env_seconds", f.env_seconds},
            {"cluster_seconds", f.cluster_seconds},
            {"config", f.config}};
-  if (rows.size() >= 3) {
-    const Json& a = rows.front();
-    const Json& b = rows.back();
-    const double dt = b["time_s"].get<double>() - a["time_s"].get<double>();
-    const double ds = b["samples"].get<double>() - a["samples"].get<double>();
-    const double sps = dt > 0 ? ds / dt : 0.0;
-    double lag = 0.0;
-    for (const Json& r : rows) lag += r["policy_lag_mean"].get<double>();
-    out["cluster_samples_per_s"] = sps;
-    if (cpu_at_update.size() >= rows.size()) {
-      const double dcpu = cpu_at_update[rows.size() - 1] - cpu_at_update[0];
-      const double env_cpu = 0.5 * (env_cpu_before + env_cpu_after);
-      const double per_cpu = dcpu > 0 ? ds / dcpu : 0.0;
-      out["cluster_samples_per_cpu_s"] = per_cpu;
-      out["env_samples_per_cpu_s"] = env_cpu;
-      out["ratio_cluster_to_env_per_cpu_s"] = env_cpu > 0 ? per_cpu / env_cpu : 0.0;
-    }
-    out["ratio_cluster_to_env"] = env_sps > 0 ? sps / env_sps : 0.0;
-    out["wire_bytes_per_sample"] = b["wire_bytes_per_sample"];
-    out["policy_lag_mean"] = lag / rows.size();
-    out["dropped_stale"] = b["dropped_stale"];
+  const bool ok = !ratio.empty();
+  if (ok) {
+    out["cluster_samples_per_s"] = Median(cluster_sps);
+    out["cluster_samples_per_cpu_s"] = Median(cluster_cpu);
+    out["ratio_cluster_to_env"] = Median(ratio);
+    out["ratio_cluster_to_env_per_cpu_s"] = Median(ratio_cpu);
+    out["ratio_cluster_to_env_spread"] = Spread(ratio);
+    out["ratio_cluster_to_env_per_cpu_s_spread"] = Spread(ratio_cpu);
+    out["learner_cpu_share"] = Spread(learner_share);
+    out["env_samples_per_s_runs"] = env_sps;
+    out["wire_bytes_per_sample"] = last["wire_bytes_per_sample"];
+    out["policy_lag_mean"] = last["policy_lag_mean"];
+    out["dropped_stale"] = last["dropped_stale"];
   } else {
     out["cluster_samples_per_s"] = nullptr;
-    out["error"] = "fewer than 3 updates in " + std::to_string(f.cluster_seconds) +
+    out["error"] = "fewer than 3 updates per cluster run in " + std::to_string(f.cluster_seconds) +
                    " s; raise --cluster-seconds";
   }
-  if (f.json) {
-    std::cout << out.dump() << std::endl;
-  } else {
-    std::cout << out.dump(2) << std::endl;
+  std::cout << (f.json ? out.dump() : out.dump(2)) << std::endl;
+  return ok ? 0 : 1;
+}
+
+// ---- perch bench train ----
+
+// The physics before issue 19 (docs/env.md): Bullet's infinite floor bounds, its 4096-entry
+// pools, the authors' never-sleeping dynamic chair.
+Json LegacyPhysics() {
+  return Json{{"floor_half_extent", 0.0}, {"collision_pool_size", 4096}, {"chair_body", "dynamic"}};
+}
+
+struct BenchTrainFlags {
+  std::string config = std::string(PERCH_SOURCE_DIR) + "/configs/default.json";
+  int actors = 0;  // 0: one per core
+  int envs = 0;
+  int64_t updates = 20;
+  int rounds = 2;
+  std::string baseline_exe, candidate_exe;  // empty: this program
+  std::string baseline_physics = "legacy";  // "legacy" or "config"
+  std::string candidate_physics = "config";
+  double timeout_s = 900.0;
+  bool json = false;
+};
+
+struct TrainArm {
+  std::string name, exe, physics, config_path;
+  std::vector<double> samples, seconds, cpu, learner_cpu;  // per run, steady-state window
+};
+
+Json ArmJson(const TrainArm& a) {
+  double s = 0, t = 0, c = 0, l = 0;
+  std::vector<double> sps, us;
+  for (size_t i = 0; i < a.samples.size(); ++i) {
+    s += a.samples[i];
+    t += a.seconds[i];
+    c += a.cpu[i];
+    l += a.learner_cpu[i];
+    sps.push_back(a.seconds[i] > 0 ? a.samples[i] / a.seconds[i] : 0.0);
+    us.push_back(a.samples[i] > 0 ? 1e6 * a.cpu[i] / a.samples[i] : 0.0);
   }
-  return rows.size() >= 3 ? 0 : 1;
+  return Json{{"exe", a.exe},
+              {"physics", a.physics},
+              {"config", a.config_path},
+              {"samples_per_s", t > 0 ? s / t : 0.0},
+              {"cpu_us_per_step", s > 0 ? 1e6 * c / s : 0.0},
+              {"learner_cpu_share", c > 0 ? l / c : 0.0},
+              {"samples", s},
+              {"samples_per_s_runs", sps},
+              {"cpu_us_per_step_runs", us}};
+}
+
+int RunBenchTrain(const BenchTrainFlags& f) {
+  LogToStderr("bench");
+  InstallStopHandlers();
+  if (f.updates < 3) throw ConfigError("--updates: must be >= 3");
+  if (f.rounds < 1) throw ConfigError("--rounds: must be >= 1");
+  const Json base = LoadJsonFile(f.config);
+  const ExperimentConfig cfg = ExperimentConfigFromJson(base, f.config);
+  const int cores = std::max(1u, std::thread::hardware_concurrency());
+  const int actors = f.actors > 0 ? f.actors : cores;
+  const int envs = f.envs > 0 ? f.envs : cfg.cluster.envs_per_actor;
+  const std::string dir = MakeTempDir();
+  auto make_arm = [&](const std::string& name, const std::string& exe, const std::string& physics,
+                      const std::string& flag) {
+    TrainArm a;
+    a.name = name;
+    a.exe = exe.empty() ? SelfExe() : exe;
+    a.physics = physics;
+    Json j = base;
+    if (physics == "legacy") {
+      if (!j.contains("env")) j["env"] = Json::object();
+      Json& p = j["env"]["physics"];
+      if (p.is_null()) p = Json::object();
+      const Json legacy = LegacyPhysics();
+      for (const auto& [k, v] : legacy.items()) p[k] = v;
+    } else if (physics != "config") {
+      throw ConfigError(flag + ": expected \"legacy\" or \"config\", got \"" + physics + "\"");
+    }
+    a.config_path = dir + "/" + name + ".json";
+    if (exe.empty()) ExperimentConfigFromJson(j, a.config_path);  // refuse a bad config early
+    SaveJsonFileAtomic(a.config_path, j);
+    return a;
+  };
+  std::vector<TrainArm> arms = {
+      make_arm("baseline", f.baseline_exe, f.baseline_physics, "--baseline-physics"),
+      make_arm("candidate", f.candidate_exe, f.candidate_physics, "--candidate-physics")};
+  spdlog::info(
+      "bench train: {} rounds of baseline and candidate, {} updates each, learner + {} "
+      "actors x {} envs (logs in {})",
+      f.rounds, f.updates, actors, envs, dir);
+  std::vector<double> round_ratio, round_cpu_ratio;
+  for (int r = 0; r < f.rounds && !g_stop.load(); ++r) {
+    double sps[2] = {0, 0}, us[2] = {0, 0};
+    // ABBA order: a drift in the machine's load biases neither arm.
+    for (int i = 0; i < 2 && !g_stop.load(); ++i) {
+      const int k = r % 2 == 0 ? i : 1 - i;
+      TrainArm& a = arms[k];
+      ClusterRunOptions o;
+      o.exe = a.exe;
+      o.config = a.config_path;
+      o.actors = actors;
+      o.envs = envs;
+      o.max_updates = f.updates;
+      o.timeout_s = f.timeout_s;
+      o.dir = dir + "/" + a.name + "-" + std::to_string(r);
+      ::mkdir(o.dir.c_str(), 0755);
+      const ClusterRun run = RunCluster(o);
+      if (!run.ok()) {
+        throw std::runtime_error("bench train: " + a.name + " run " + std::to_string(r) +
+                                 " finished only " + std::to_string(run.rows.size()) +
+                                 " updates (logs in " + o.dir + ")");
+      }
+      a.samples.push_back(run.Samples());
+      a.seconds.push_back(run.Seconds());
+      a.cpu.push_back(run.Cpu());
+      a.learner_cpu.push_back(run.LearnerCpu());
+      sps[k] = run.Samples() / run.Seconds();
+      us[k] = 1e6 * run.Cpu() / run.Samples();
+      spdlog::info(
+          "bench train: round {} {}: {:.0f} samples/s, {:.1f} CPU us per step, learner "
+          "{:.1f}% of the CPU",
+          r, a.name, sps[k], us[k], 100.0 * run.LearnerCpu() / run.Cpu());
+    }
+    round_ratio.push_back(sps[1] / sps[0]);
+    round_cpu_ratio.push_back(us[0] / us[1]);
+  }
+  const Json b = ArmJson(arms[0]), c = ArmJson(arms[1]);
+  const Json out{
+      {"config", f.config},
+      {"updates", f.updates},
+      {"rounds", f.rounds},
+      {"actors", actors},
+      {"envs_per_actor", envs},
+      {"steps_per_update", cfg.ppo.steps_per_update},
+      {"baseline", b},
+      {"candidate", c},
+      {"legacy_physics", LegacyPhysics()},
+      {"ratio_samples_per_s", c["samples_per_s"].get<double>() / b["samples_per_s"].get<double>()},
+      {"ratio_cpu_per_step",
+       b["cpu_us_per_step"].get<double>() / c["cpu_us_per_step"].get<double>()},
+      {"ratio_samples_per_s_rounds", Spread(round_ratio)},
+      {"ratio_cpu_per_step_rounds", Spread(round_cpu_ratio)},
+      {"timing",
+       "steady state (first update to last) of each run; CPU = learner + actors from "
+       "/proc; ratio_cpu_per_step = baseline / candidate CPU per control step (> 1: "
+       "candidate cheaper)"},
+      {"logs", dir}};
+  std::cout << (f.json ? out.dump() : out.dump(2)) << std::endl;
+  return 0;
 }
 
 }  // namespace
@@ -530,10 +793,33 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   b->add_option("--actors", bf->actors, "actor processes (default: one per core)");
   b->add_option("--envs", bf->envs, "envs per actor");
   b->add_option("--env-seconds", bf->env_seconds, "duration of the env-only baseline");
-  b->add_option("--cluster-seconds", bf->cluster_seconds, "duration of the cluster run");
+  b->add_option("--cluster-seconds", bf->cluster_seconds, "duration of each cluster run");
+  b->add_option("--repeats", bf->repeats, "cluster runs, each between two env-only runs");
   b->add_flag("--json", bf->json, "print one JSON object");
   b->callback([bf] {
     const int rc = RunBenchCluster(*bf);
+    if (rc != 0) throw CLI::RuntimeError(rc);
+  });
+
+  // perch bench train
+  auto tb = std::make_shared<BenchTrainFlags>();
+  CLI::App* bt = bench.add_subcommand(
+      "train", "A short training run (learner + actors) with baseline and candidate settings");
+  bt->add_option("--config", tb->config, "experiment config (default: configs/default.json, walk)");
+  bt->add_option("--actors", tb->actors, "actor processes (default: one per core)");
+  bt->add_option("--envs", tb->envs, "envs per actor");
+  bt->add_option("--updates", tb->updates, "PPO updates per run (the first is start-up)");
+  bt->add_option("--rounds", tb->rounds, "runs of each arm, in ABBA order");
+  bt->add_option("--baseline-physics", tb->baseline_physics,
+                 "legacy (physics before issue 19) or config (as the config says)");
+  bt->add_option("--candidate-physics", tb->candidate_physics, "config or legacy");
+  bt->add_option("--baseline-exe", tb->baseline_exe,
+                 "perch program for the baseline arm (default: this one), e.g. another build");
+  bt->add_option("--candidate-exe", tb->candidate_exe, "perch program for the candidate arm");
+  bt->add_option("--timeout-s", tb->timeout_s, "give up on a run after this long");
+  bt->add_flag("--json", tb->json, "print one JSON object");
+  bt->callback([tb] {
+    const int rc = RunBenchTrain(*tb);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });
 

@@ -13,5 +13,6 @@ void RegisterLearnerCommands(CLI::App& root, CLI::App& bench);  // app/cmd_ppo.c
 void RegisterClusterCommands(CLI::App& root, CLI::App& bench);  // app/cmd_cluster.cc
 void RegisterVizCommands(CLI::App& root, CLI::App& bench);      // app/cmd_viz.cc
 void RegisterEvalCommands(CLI::App& root, CLI::App& bench);     // app/cmd_eval.cc
+void RegisterProfileCommands(CLI::App& root, CLI::App& bench);  // app/cmd_profile.cc
 
 }  // namespace perch

@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
   perch::RegisterClusterCommands(app, *bench);
   perch::RegisterVizCommands(app, *bench);
   perch::RegisterEvalCommands(app, *bench);
+  perch::RegisterProfileCommands(app, *bench);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

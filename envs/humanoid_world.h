@@ -10,6 +10,7 @@
 
 #include <array>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include <Eigen/Dense>
@@ -22,6 +23,19 @@
 namespace perch {
 
 class PdController;
+
+enum class ChairBody {
+  kStatic,    // fixed; costs nothing (the sit task and its metrics only read contacts with it)
+  kDynamic,   // the chair file's mass and inertia, never sleeping (the authors' 1000 kg chair)
+  kSleeping,  // as kDynamic, but asleep (not simulated) until a body comes near; sleeps again
+              // once left at rest (Bullet's sleeping)
+};
+// "static", "dynamic", "sleeping" and back; ConfigError naming ctx on another name.
+ChairBody ChairBodyFromName(const std::string& name, const std::string& ctx);
+std::string ChairBodyName(ChairBody body);
+
+// Depth of the floor's broadphase slab below z = 0 [m]: deeper than anything sinks into it.
+constexpr double kFloorSlabDepth = 1.0;
 
 struct PhysicsConfig {
   // The paper's 240 Hz physics / 60 Hz control, matching our retargeted references (1/60 s per
@@ -40,7 +54,9 @@ struct PhysicsConfig {
   double max_joint_speed = 100.0;
   // A manifold point counts as contact when its signed distance is below this [m].
   double contact_distance = 0.02;
-  // A joint's limit constraint is active only within limit_margin + 2 |qdot| dt of a limit [rad].
+  // A joint's limit constraint is in the world only within limit_margin + 2 |qdot| dt of a limit
+  // [rad]. Bullet makes a limit row only at or past the limit, so this saves the per-constraint
+  // overhead and changes no physics (docs/env.md).
   double limit_margin = 0.05;
   // Passive joint damping, applied implicitly (docs/env.md "Stability under random actions"):
   // c_j = joint_damping + max_torque_j / damping_speed, i.e. full torque alone cannot spin a
@@ -51,6 +67,18 @@ struct PhysicsConfig {
   // 4e-8 (a 1 g point), which lets the ankles and hips reach Bullet's speed clamp within one
   // control step; 1e-2 is about twice the foot's inertia about the ankle (docs/env.md).
   double helper_link_inertia = 1e-2;
+  // The floor is the plane z = 0; for the broadphase it is a slab this wide in x and y [m] (half
+  // width) and kFloorSlabDepth deep, so only bodies near the floor are paired with it. Contacts
+  // are the plane's either way. 0: Bullet's infinite bounds, which pair every body with the floor
+  // at every step (before issue 19; docs/env.md "Floor").
+  double floor_half_extent = 1000.0;
+  // Entries in each of Bullet's contact-manifold and collision-algorithm pools. The world is
+  // rebuilt at every reset, and Bullet's default of 4096 makes that 4x dearer; past the pool
+  // Bullet takes memory from the heap, so the size changes the cost only, never the physics.
+  int collision_pool_size = 64;
+  // The chair's body (docs/env.md "Chair"): a chair file that says "dynamic": false is static in
+  // every mode.
+  ChairBody chair_body = ChairBody::kStatic;
 
   static PhysicsConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;
@@ -122,6 +150,11 @@ class World {
   Contacts ReadContacts() const;
   // Contact points in all manifolds, and how many of them are between two humanoid bodies.
   int NumContactPoints(int* self_points = nullptr) const;
+  // Contact manifolds (one per broadphase pair that reached the narrowphase) and how many of them
+  // pair a body with the floor.
+  int NumManifolds(int* floor_manifolds = nullptr) const;
+  // Whether Bullet simulates the chair now (false for a static or sleeping chair).
+  bool ChairAwake() const;
   bool has_chair() const { return chair_ != nullptr; }
   // Another chair (not null when there was one; it must outlive the world), from the next
   // SetState on: per-episode random chairs.

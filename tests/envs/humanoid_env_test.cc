@@ -97,20 +97,26 @@ TEST(HumanoidEnv, PdModeDrivesEachJointToItsTarget) {
   }
 }
 
+// The sit metrics' seat contact works whatever the chair's body (static by default).
 TEST(HumanoidEnv, DroppedOnSeatRegistersPelvisSeatContact) {
-  HumanoidChairEnv env(PdConfig());
-  std::vector<float> obs(env.spec().obs_dim), act(21);
-  const Chair chair = Chair::Load(Chair::PresetPath("authors"));
-  const HumanoidState s = SeatedPose(env.model(), chair, ChairPlacement{}, 0.05);
-  env.ResetToState(s, obs.data());
-  EXPECT_FALSE(env.PelvisSeatContact());  // 5 cm above the seat
-  EXPECT_FALSE(env.contacts().humanoid_chair);
-  env.HoldPoseAction(s.q.data(), act.data());
-  for (int t = 0; t < 60; ++t) ASSERT_FALSE(env.Step(act.data(), obs.data()).terminated);
-  EXPECT_TRUE(env.contacts().pelvis_chair);
-  EXPECT_TRUE(env.PelvisSeatContact());
-  EXPECT_LT(env.PelvisPosition().z(), 0.54);
-  EXPECT_LT(env.PelvisSeatDistance(), 0.3);
+  for (ChairBody body : {ChairBody::kStatic, ChairBody::kDynamic, ChairBody::kSleeping}) {
+    SCOPED_TRACE(ChairBodyName(body));
+    EnvConfig cfg = PdConfig();
+    cfg.physics.chair_body = body;
+    HumanoidChairEnv env(cfg);
+    std::vector<float> obs(env.spec().obs_dim), act(21);
+    const Chair chair = Chair::Load(Chair::PresetPath("authors"));
+    const HumanoidState s = SeatedPose(env.model(), chair, ChairPlacement{}, 0.05);
+    env.ResetToState(s, obs.data());
+    EXPECT_FALSE(env.PelvisSeatContact());  // 5 cm above the seat
+    EXPECT_FALSE(env.contacts().humanoid_chair);
+    env.HoldPoseAction(s.q.data(), act.data());
+    for (int t = 0; t < 60; ++t) ASSERT_FALSE(env.Step(act.data(), obs.data()).terminated);
+    EXPECT_TRUE(env.contacts().pelvis_chair);
+    EXPECT_TRUE(env.PelvisSeatContact());
+    EXPECT_LT(env.PelvisPosition().z(), 0.54);
+    EXPECT_LT(env.PelvisSeatDistance(), 0.3);
+  }
 }
 
 TEST(HumanoidEnv, FootContactFlagsStandingAndLifted) {
@@ -507,6 +513,9 @@ TEST(HumanoidEnv, ConfigRoundTrip) {
   c.spawn.zone = 3;
   c.chair_placement.yaw = 0.5;
   c.physics.solver_iterations = 7;
+  c.physics.chair_body = ChairBody::kSleeping;
+  c.physics.collision_pool_size = 4096;
+  c.physics.floor_half_extent = 0.0;
   const Json j = c.ToJson();
   const EnvConfig back = EnvConfig::FromJson(j, "x");
   EXPECT_EQ(back.ToJson(), j);
