@@ -26,6 +26,8 @@
 #include "actor/process.h"
 #include "actor/role_setup.h"
 #include "app/commands.h"
+#include "learner/policy.h"
+#include "learner/rollout.h"
 #include "learner/service/checkpoint.h"
 #include "learner/service/learner.h"
 #include "learner/service/run_summary.h"
@@ -441,42 +443,43 @@ struct BenchFlags {
   double env_seconds = 5.0;
   double cluster_seconds = 20.0;
   int repeats = 3;
+  bool train_policy = false;
   bool json = false;
 };
 
-// Env-only baseline: one thread per actor, each stepping its envs with actions drawn as the
-// untrained policy draws them (mean ~0, sigma = exp(init_log_std), unclipped; the env clips). The
-// env's cost depends on the actions (falls, contacts, resets), so uniform actions would not be the
-// same work as the cluster's.
+// Env-only baseline: one thread per actor process, each collecting from its envs as an actor does
+// (RolloutCollector with the learner's initial policy: the same network, initial weights and
+// observation normalisation, sampled actions), without sockets or a learner. The env's cost
+// depends on the actions (falls, contacts, resets): random N(0, sigma) actions made a step about
+// 20% cheaper than the initial policy's (docs/cluster.md), so they would not be the same work.
 // Returns samples per wall second; *per_cpu_s gets samples per CPU second of the stepping threads.
 double EnvOnlySamplesPerS(const ExperimentConfig& cfg, int threads, int envs, double seconds,
                           double* per_cpu_s) {
-  std::unique_ptr<Env> probe = MakeExperimentEnv(cfg);
-  const double sigma = std::exp(ResolvePolicyConfig(cfg, probe->spec()).init_log_std);
+  const ActorSetup setup = MakeActorSetup(cfg);
   std::vector<uint64_t> steps(threads, 0);
   std::vector<double> cpu(threads, 0.0);
   std::vector<std::thread> pool;
   const double t0 = MonotonicSeconds();
   for (int k = 0; k < threads; ++k) {
     pool.emplace_back([&, k] {
+      PolicyRunner runner(setup.policy, setup.obs_norm);
+      runner.SetWeights(ActorCritic(setup.policy, setup.seed).params(), runner.normalizer().stats(),
+                        1);
       std::vector<std::unique_ptr<Env>> es;
-      for (int i = 0; i < envs; ++i) es.push_back(MakeExperimentEnv(cfg));
-      const EnvSpec& spec = es[0]->spec();
+      std::vector<std::unique_ptr<RolloutCollector>> collectors;
       Rng rng(cfg.seed + k);
-      std::vector<float> obs(spec.obs_dim), act(spec.act_dim);
-      for (auto& e : es) {
-        e->Seed(rng.NextU64());
-        e->Reset(obs.data());
+      for (int i = 0; i < envs; ++i) {
+        es.push_back(setup.make_env());
+        es.back()->Seed(rng.NextU64());
+        collectors.push_back(std::make_unique<RolloutCollector>(es.back().get(), i));
       }
+      Rollout rollout;
+      EpisodeStats stats;
       const double c0 = ThreadCpuSeconds();
       while (MonotonicSeconds() - t0 < seconds) {
-        for (auto& e : es) {
-          for (int j = 0; j < spec.act_dim; ++j) {
-            act[j] = static_cast<float>(sigma * rng.Normal());
-          }
-          const StepResult r = e->Step(act.data(), obs.data());
-          if (r.terminated || r.truncated) e->Reset(obs.data());
-          ++steps[k];
+        for (auto& c : collectors) {
+          c->Collect(&runner, rng, setup.cluster.segment_steps, &rollout, &stats);
+          steps[k] += rollout.size();
         }
       }
       cpu[k] = ThreadCpuSeconds() - c0;
@@ -517,6 +520,16 @@ int RunBenchCluster(const BenchFlags& f) {
       "bench cluster: {} repeats of env only ({} threads x {} envs, {:.0f} s) and "
       "cluster (learner + {} actors, {:.0f} s)",
       f.repeats, actors, envs, f.env_seconds, actors, f.cluster_seconds);
+  // The cluster's actors should do the env-only threads' work: by default the learner runs every
+  // PPO epoch but with a learning rate of 1e-12, so the policy stays the initial one. A policy
+  // that learns changes what the humanoid does, and with it the cost of a step, within seconds.
+  std::string cluster_config = f.config;
+  if (!f.train_policy) {
+    Json j = LoadJsonFile(f.config);
+    j["ppo"]["learning_rate"] = 1e-12;
+    cluster_config = MakeTempDir() + "/frozen_policy.json";
+    SaveJsonFileAtomic(cluster_config, j);
+  }
   env_run();
   std::vector<double> ratio, ratio_cpu, cluster_sps, cluster_cpu, learner_share;
   Json last;
@@ -524,7 +537,7 @@ int RunBenchCluster(const BenchFlags& f) {
   for (int k = 0; k < f.repeats && !g_stop.load(); ++k) {
     ClusterRunOptions o;
     o.exe = SelfExe();
-    o.config = f.config;
+    o.config = cluster_config;
     o.actors = actors;
     o.envs = envs;
     o.seconds = f.cluster_seconds;
@@ -562,6 +575,7 @@ int RunBenchCluster(const BenchFlags& f) {
            {"updates", updates},
            {"env_seconds", f.env_seconds},
            {"cluster_seconds", f.cluster_seconds},
+           {"policy", f.train_policy ? "learning" : "frozen (learning_rate 1e-12)"},
            {"config", f.config}};
   const bool ok = !ratio.empty();
   if (ok) {
@@ -609,16 +623,18 @@ struct BenchTrainFlags {
 struct TrainArm {
   std::string name, exe, physics, config_path;
   std::vector<double> samples, seconds, cpu, learner_cpu;  // per run, steady-state window
+  std::vector<double> episodes;  // per run, episodes ended in the window
 };
 
 Json ArmJson(const TrainArm& a) {
-  double s = 0, t = 0, c = 0, l = 0;
+  double s = 0, t = 0, c = 0, l = 0, e = 0;
   std::vector<double> sps, us;
   for (size_t i = 0; i < a.samples.size(); ++i) {
     s += a.samples[i];
     t += a.seconds[i];
     c += a.cpu[i];
     l += a.learner_cpu[i];
+    e += a.episodes[i];
     sps.push_back(a.seconds[i] > 0 ? a.samples[i] / a.seconds[i] : 0.0);
     us.push_back(a.samples[i] > 0 ? 1e6 * a.cpu[i] / a.samples[i] : 0.0);
   }
@@ -629,6 +645,8 @@ Json ArmJson(const TrainArm& a) {
               {"cpu_us_per_step", s > 0 ? 1e6 * c / s : 0.0},
               {"learner_cpu_share", c > 0 ? l / c : 0.0},
               {"samples", s},
+              // Early in training episodes are short: resets (world rebuilds) weigh more.
+              {"mean_episode_steps", e > 0 ? s / e : 0.0},
               {"samples_per_s_runs", sps},
               {"cpu_us_per_step_runs", us}};
 }
@@ -694,10 +712,18 @@ int RunBenchTrain(const BenchTrainFlags& f) {
                                  " finished only " + std::to_string(run.rows.size()) +
                                  " updates (logs in " + o.dir + ")");
       }
+      if (!(run.Cpu() > 0.0 && run.Seconds() > 0.0)) {
+        throw std::runtime_error("bench train: " + a.name + " run " + std::to_string(r) +
+                                 ": no CPU time measured between the first and last update; "
+                                 "raise --updates");
+      }
       a.samples.push_back(run.Samples());
       a.seconds.push_back(run.Seconds());
       a.cpu.push_back(run.Cpu());
       a.learner_cpu.push_back(run.LearnerCpu());
+      double episodes = 0;
+      for (size_t u = 1; u < run.rows.size(); ++u) episodes += run.rows[u]["episodes"].get<double>();
+      a.episodes.push_back(episodes);
       sps[k] = run.Samples() / run.Seconds();
       us[k] = 1e6 * run.Cpu() / run.Samples();
       spdlog::info(
@@ -795,6 +821,8 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   b->add_option("--env-seconds", bf->env_seconds, "duration of the env-only baseline");
   b->add_option("--cluster-seconds", bf->cluster_seconds, "duration of each cluster run");
   b->add_option("--repeats", bf->repeats, "cluster runs, each between two env-only runs");
+  b->add_flag("--train-policy", bf->train_policy,
+              "let the policy learn (default: learning rate 1e-12, the env-only runs' policy)");
   b->add_flag("--json", bf->json, "print one JSON object");
   b->callback([bf] {
     const int rc = RunBenchCluster(*bf);

@@ -41,8 +41,13 @@ class BenchTest : public ::testing::Test {
 };
 
 TEST_F(BenchTest, TrainRunsBothArmsWithTheirPhysics) {
-  const Result r = RunPerch("bench train --json --config " + Config("mock.json") +
-                            " --updates 3 --rounds 1 --actors 1 --envs 1");
+  // The mock env with some work per step, so that CPU time advances measurably (/proc ticks).
+  Json mock = LoadJsonFile(Config("mock.json"));
+  mock["mock_env"]["work_iterations"] = 20000;
+  const std::string config = ::testing::TempDir() + "bench_train_mock.json";
+  SaveJsonFileAtomic(config, mock);
+  const Result r = RunPerch("bench train --json --config " + config +
+                            " --updates 5 --rounds 1 --actors 1 --envs 1");
   ASSERT_EQ(r.code, 0) << r.out;
   const Json j = Json::parse(r.out);
   for (const char* arm : {"baseline", "candidate"}) {
