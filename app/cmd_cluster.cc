@@ -327,22 +327,31 @@ struct ClusterRunOptions {
 // One learner + actors on loopback. CPU time of every process is sampled whenever an update lands,
 // so that samples and CPU are measured over the same steady-state window: from the first update
 // (start-up and the first batch excluded) to the last.
+// CPU is read once per poll, so several updates that land between two polls share a reading;
+// the window therefore starts at the last update of the first poll that saw any (`first`), never
+// at an update whose CPU reading was taken later than its metrics row.
 struct ClusterRun {
   std::vector<Json> rows;                     // metrics.jsonl
   std::vector<double> cpu_at_update;          // [update] CPU s of the learner and all actors
   std::vector<double> learner_cpu_at_update;  // [update] CPU s of the learner
+  std::vector<int> poll_of_update;            // [update] the poll that first saw it
   double wall_s = 0.0;
 
-  bool ok() const { return rows.size() >= 3; }
+  size_t First() const {
+    size_t f = 0;
+    while (f + 1 < rows.size() && poll_of_update[f + 1] == poll_of_update[0]) ++f;
+    return f;
+  }
+  bool ok() const { return rows.size() >= 3 && First() + 2 <= rows.size() - 1; }
   double Samples() const {
-    return rows.back()["samples"].get<double>() - rows.front()["samples"].get<double>();
+    return rows.back()["samples"].get<double>() - rows[First()]["samples"].get<double>();
   }
   double Seconds() const {
-    return rows.back()["time_s"].get<double>() - rows.front()["time_s"].get<double>();
+    return rows.back()["time_s"].get<double>() - rows[First()]["time_s"].get<double>();
   }
-  double Cpu() const { return cpu_at_update[rows.size() - 1] - cpu_at_update[0]; }
+  double Cpu() const { return cpu_at_update[rows.size() - 1] - cpu_at_update[First()]; }
   double LearnerCpu() const {
-    return learner_cpu_at_update[rows.size() - 1] - learner_cpu_at_update[0];
+    return learner_cpu_at_update[rows.size() - 1] - learner_cpu_at_update[First()];
   }
 };
 
@@ -377,6 +386,7 @@ ClusterRun RunCluster(const ClusterRunOptions& o) {
   }
   ClusterRun r;
   size_t seen = 0;
+  int polls = 0;
   while (!g_stop.load()) {
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
     std::ifstream mf(run_dir + "/metrics.jsonl");
@@ -390,7 +400,9 @@ ClusterRun RunCluster(const ClusterRunOptions& o) {
       for (; seen < lines; ++seen) {
         r.cpu_at_update.push_back(cpu);
         r.learner_cpu_at_update.push_back(lcpu);
+        r.poll_of_update.push_back(polls);
       }
+      ++polls;
     }
     const double t = MonotonicSeconds() - t0;
     if (o.max_updates > 0 && seen >= static_cast<size_t>(o.max_updates)) break;
@@ -709,8 +721,9 @@ int RunBenchTrain(const BenchTrainFlags& f) {
       const ClusterRun run = RunCluster(o);
       if (!run.ok()) {
         throw std::runtime_error("bench train: " + a.name + " run " + std::to_string(r) +
-                                 " finished only " + std::to_string(run.rows.size()) +
-                                 " updates (logs in " + o.dir + ")");
+                                 " finished " + std::to_string(run.rows.size()) +
+                                 " updates, too few after the first CPU reading (logs in " +
+                                 o.dir + "); raise --updates");
       }
       if (!(run.Cpu() > 0.0 && run.Seconds() > 0.0)) {
         throw std::runtime_error("bench train: " + a.name + " run " + std::to_string(r) +
@@ -722,7 +735,9 @@ int RunBenchTrain(const BenchTrainFlags& f) {
       a.cpu.push_back(run.Cpu());
       a.learner_cpu.push_back(run.LearnerCpu());
       double episodes = 0;
-      for (size_t u = 1; u < run.rows.size(); ++u) episodes += run.rows[u]["episodes"].get<double>();
+      for (size_t u = run.First() + 1; u < run.rows.size(); ++u) {
+        episodes += run.rows[u]["episodes"].get<double>();
+      }
       a.episodes.push_back(episodes);
       sps[k] = run.Samples() / run.Seconds();
       us[k] = 1e6 * run.Cpu() / run.Samples();

@@ -67,6 +67,9 @@ TaskDef TurnDef(const std::string& name) {
   d.name = name;
   d.description = name + ": in-place turn by imitation of the turn clip, random yaw per episode";
   d.obs_layout = ObsLayout::kProprio;
+  d.layout_for = [](const TaskEnvConfig& c) {
+    return c.Section<TurnTaskConfig>().heading_goal ? ObsLayout::kProprioGoal : ObsLayout::kProprio;
+  };
   d.read = [name](const Json* j, const std::string& ctx, TaskEnvConfig* c) {
     c->section = std::make_shared<TaskSectionOf<TurnTaskConfig>>(
         TurnTaskConfig::FromJson(j != nullptr ? *j : Json::object(), ctx, name));

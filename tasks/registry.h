@@ -37,6 +37,8 @@ struct TaskDef {
   std::string name;  // env.task, the config section's key and the wire task name
   std::string description;
   ObsLayout obs_layout = ObsLayout::kProprioGoal;
+  // When set, the layout follows from the task's section (read first) instead of obs_layout.
+  std::function<ObsLayout(const TaskEnvConfig& config)> layout_for;
   bool needs_chair = false;  // false: the chair defaults to "none"
   // Reads the task's section (j null: the defaults) into config (ConfigError naming ctx).
   std::function<void(const Json* j, const std::string& ctx, TaskEnvConfig* config)> read;

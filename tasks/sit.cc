@@ -36,6 +36,7 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
                   "hold_phase",
                   "hold_pose_weight",
                   "hold_energy_weight",
+                  "hold_contact_weight",
                   "energy",
                   "pelvis_end_offset",
                   "clip_seat_height_m",
@@ -66,6 +67,7 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "hold_phase", c.hold_phase, ctx);
   GetOptional(j, "hold_pose_weight", c.hold_pose_weight, ctx);
   GetOptional(j, "hold_energy_weight", c.hold_energy_weight, ctx);
+  GetOptional(j, "hold_contact_weight", c.hold_contact_weight, ctx);
   if (j.contains("energy")) c.energy = EnergyCostConfig::FromJson(j["energy"], ctx + ".energy");
   GetOptional(j, "pelvis_end_offset", c.pelvis_end_offset, ctx);
   GetOptional(j, "clip_seat_height_m", c.clip_seat_height_m, ctx);
@@ -98,7 +100,8 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!(c.success_contact_s > 0)) throw ConfigError(ctx + ".success_contact_s: must be > 0");
   if (!(c.eval_episode_s > 0)) throw ConfigError(ctx + ".eval_episode_s: must be > 0");
   if (!(c.max_seat_height_m > 0)) throw ConfigError(ctx + ".max_seat_height_m: must be > 0");
-  for (double w : {c.approach_weight, c.hold_pose_weight, c.hold_energy_weight}) {
+  for (double w : {c.approach_weight, c.hold_pose_weight, c.hold_energy_weight,
+                   c.hold_contact_weight}) {
     if (!(w >= 0)) throw ConfigError(ctx + ": reward weights must be >= 0");
   }
   for (double v : c.pelvis_end_offset) {
@@ -117,6 +120,7 @@ Json SitTaskConfig::ToJson() const {
               {"hold_phase", hold_phase},
               {"hold_pose_weight", hold_pose_weight},
               {"hold_energy_weight", hold_energy_weight},
+              {"hold_contact_weight", hold_contact_weight},
               {"energy", energy.ToJson()},
               {"pelvis_end_offset", pelvis_end_offset},
               {"clip_seat_height_m", clip_seat_height_m},
@@ -221,7 +225,10 @@ TaskStep SitTask::OnStep(const HumanoidChairEnv& env, const float* action) {
     t.similarity = sim.total;
     t.approach = ApproachReward(m_.prev_distance, t.seat_distance_m, dt_, c_.approach_weight);
   }
-  t.total = t.similarity + t.approach + t.energy;
+  if (c_.hold_contact_weight > 0 && ClipEnded(k) && env.PelvisSeatContact()) {
+    t.contact = c_.hold_contact_weight;
+  }
+  t.total = t.similarity + t.approach + t.energy + t.contact;
   terms_ = t;
   m_.prev_distance = t.seat_distance_m;
   RememberPose(env);

@@ -24,6 +24,10 @@ struct SitTaskConfig {
   bool hold_phase = false;
   double hold_pose_weight = 0.5;
   double hold_energy_weight = 0.1;
+  // Ours (0 = the paper/authors): + this per control step while the pelvis is in seat contact
+  // after the clip has ended. The success test is pelvis contact; tracking the seated pose alone
+  // lets the policy rest on its thighs a few mm above the seat.
+  double hold_contact_weight = 0.0;
   EnergyCostConfig energy;
   // Where the clip's last-frame pelvis lands, relative to the seat target, in the chair frame
   // (x forward from the seat, y to the chair's left) [m].
@@ -66,7 +70,7 @@ struct SitTaskConfig {
 };
 
 struct SitTerms {
-  double pose = 0, joint_vel = 0, similarity = 0, approach = 0, energy = 0, total = 0;
+  double pose = 0, joint_vel = 0, similarity = 0, approach = 0, energy = 0, contact = 0, total = 0;
   double seat_distance_m = 0;  // 3-D pelvis - seat target
 };
 

@@ -35,12 +35,13 @@ TaskEnvConfig TaskEnvConfig::FromJson(const Json& j, const std::string& ctx) {
       env_json.erase(task);
     }
     // The layout follows from the task; a config that says otherwise is refused by name.
-    const std::string want = ObsLayoutName(def->obs_layout);
+    const ObsLayout layout = def->layout_for ? def->layout_for(c) : def->obs_layout;
+    const std::string want = ObsLayoutName(layout);
     if (!env_json.contains("obs_layout")) {
       env_json["obs_layout"] = want;
     } else if (env_json["obs_layout"] != want) {
       throw ConfigError(ctx + ".obs_layout: task \"" + task + "\" observes \"" + want + "\" (" +
-                        std::to_string(ObsLayoutDim(def->obs_layout)) + "-d), got " +
+                        std::to_string(ObsLayoutDim(layout)) + "-d), got " +
                         env_json["obs_layout"].dump());
     }
   }

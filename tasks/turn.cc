@@ -38,7 +38,8 @@ TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
       {"reward_variant", "motion_file", "similarity", "rot_weight", "rot_alpha", "root_vel_weight",
        "root_vel_alpha", "hold_phase", "hold_pose_weight", "hold_energy_weight", "energy",
        "yaw_offset_max_deg", "rsi_prob", "rsi_max_fraction", "min_root_z", "max_yaw_error_deg", "max_episode_steps",
-       "start_joint_noise_rad", "success_after_end_s", "success_yaw_tol_deg", "start"},
+       "start_joint_noise_rad", "success_after_end_s", "success_yaw_tol_deg", "start",
+       "heading_goal", "heading_lookahead_s"},
       ctx);
   TurnTaskConfig c;
   c.motion_file = "data/motions/" + task + ".json";
@@ -75,6 +76,11 @@ TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
   GetOptional(j, "success_after_end_s", c.success_after_end_s, ctx);
   GetOptional(j, "success_yaw_tol_deg", c.success_yaw_tol_deg, ctx);
   if (j.contains("start")) c.start = BankStartConfig::FromJson(j["start"], ctx + ".start");
+  GetOptional(j, "heading_goal", c.heading_goal, ctx);
+  GetOptional(j, "heading_lookahead_s", c.heading_lookahead_s, ctx);
+  if (!(c.heading_lookahead_s >= 0 && c.heading_lookahead_s <= 2.0)) {
+    throw ConfigError(ctx + ".heading_lookahead_s: must be in [0, 2] s");
+  }
   if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
   if (!(c.yaw_offset_max_deg >= 0 && c.yaw_offset_max_deg <= 180)) {
     throw ConfigError(ctx + ".yaw_offset_max_deg: must be in [0, 180]");
@@ -112,7 +118,9 @@ Json TurnTaskConfig::ToJson() const {
               {"start_joint_noise_rad", start_joint_noise_rad},
               {"success_after_end_s", success_after_end_s},
               {"success_yaw_tol_deg", success_yaw_tol_deg},
-              {"start", start.ToJson()}};
+              {"start", start.ToJson()},
+              {"heading_goal", heading_goal},
+              {"heading_lookahead_s", heading_lookahead_s}};
 }
 
 TurnTask::TurnTask(const std::string& name, const TurnTaskConfig& config, double control_dt)
@@ -147,8 +155,25 @@ bool TurnTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState
 void TurnTask::OnReset(HumanoidChairEnv& env, Rng& rng) {
   RememberPose(env);
   terms_ = TurnTerms();
-  // The goal feature is not in the turn state; the target is kept neutral for other layouts.
-  env.SetWalkTarget(env.humanoid_state().root_pos.head<2>());
+  if (c_.heading_goal) {
+    BeforeObservation(env, rng);
+  } else {
+    // The goal feature is not in the turn state; the target is kept neutral for other layouts.
+    env.SetWalkTarget(env.humanoid_state().root_pos.head<2>());
+  }
+}
+
+double TurnTask::HeadingGoalYaw(int k) const {
+  const int ahead = static_cast<int>(std::lround(c_.heading_lookahead_s / dt_));
+  return RpyFromQuat(ReferenceAt(k + ahead).root_rot).z();
+}
+
+void TurnTask::BeforeObservation(HumanoidChairEnv& env, Rng& /*rng*/) {
+  if (!c_.heading_goal) return;
+  // A target 1 m away along the reference's heading: the walk layout's goal feature then reads
+  // [sin, cos] of the heading relative to the humanoid.
+  const double yaw = HeadingGoalYaw(env.episode_step());
+  env.SetWalkTarget(env.BodyXyz().head<2>() + Eigen::Vector2d(std::cos(yaw), std::sin(yaw)));
 }
 
 TaskStep TurnTask::OnStep(const HumanoidChairEnv& env, const float* action) {

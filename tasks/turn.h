@@ -49,6 +49,13 @@ struct TurnTaskConfig {
   // Transition fine-tuning (turn_*_from_walk, notes 4.3): start from a walk end pose with its yaw
   // set to the clip's placed frame-0 yaw, x, y = 0, height, joints and velocities as sampled.
   BankStartConfig start;
+  // Ours (off = the paper's 50-d state): observe the 52-d walk layout whose 2-d goal feature is
+  // [sin, cos] of the reference's heading heading_lookahead_s ahead, relative to the humanoid's
+  // yaw (the walk goal's convention: straight ahead = [0, 1]). The 50-d state says nothing about
+  // yaw, so the policy must time its turn from its own pose alone; our clip (69_17) turns in two
+  // bursts with a pause between them, which that cannot tell apart (docs/subtasks.md).
+  bool heading_goal = false;
+  double heading_lookahead_s = 0.0;
 
   void ApplyVariant(const std::string& variant, const std::string& ctx);
   static TurnTaskConfig FromJson(const Json& j, const std::string& ctx, const std::string& task);
@@ -68,9 +75,12 @@ class TurnTask : public ClipTask {
   int max_episode_steps() const override { return c_.max_episode_steps; }
   bool InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) override;
   void OnReset(HumanoidChairEnv& env, Rng& rng) override;
+  void BeforeObservation(HumanoidChairEnv& env, Rng& rng) override;
   TaskStep OnStep(const HumanoidChairEnv& env, const float* action) override;
 
   const TurnTaskConfig& config() const { return c_; }
+  // The placed reference's yaw at control step k (+ the heading look-ahead) [rad].
+  double HeadingGoalYaw(int k) const;
   const TurnTerms& last_terms() const { return terms_; }
   // The step at which success is judged (clip end + success_after_end_s).
   int SuccessStep() const;

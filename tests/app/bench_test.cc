@@ -43,7 +43,8 @@ class BenchTest : public ::testing::Test {
 TEST_F(BenchTest, TrainRunsBothArmsWithTheirPhysics) {
   // The mock env with some work per step, so that CPU time advances measurably (/proc ticks).
   Json mock = LoadJsonFile(Config("mock.json"));
-  mock["mock_env"]["work_iterations"] = 20000;
+  // Updates must be slower than the bench's 50 ms poll, or several share one CPU reading.
+  mock["mock_env"]["work_iterations"] = 100000;
   const std::string config = ::testing::TempDir() + "bench_train_mock.json";
   SaveJsonFileAtomic(config, mock);
   const Result r = RunPerch("bench train --json --config " + config +

@@ -99,6 +99,37 @@ TEST(SitTask, ApproachRewardIsTheSpeedTowardTheSeat) {
   EXPECT_NEAR(r.reward, t.similarity + t.approach, 1e-5);
 }
 
+TEST(SitTask, HoldContactBonusIsPaidOnlyForPelvisContactAfterTheClip) {
+  // Two envs, the same seated start and actions: the rewards differ by the bonus exactly on the
+  // steps after the clip's end where the pelvis touches the seat, and nowhere else.
+  const double w = 0.3;
+  auto plain = MakeSitEnv(Json{{"reference_state_init", false}});
+  auto bonus = MakeSitEnv(Json{{"reference_state_init", false}, {"hold_contact_weight", w}});
+  std::vector<float> obs(57), next(57), zero(21, 0.0f);
+  for (auto* e : {plain.get(), bonus.get()}) {
+    e->Seed(4);
+    e->Reset(obs.data());
+    e->ResetToState(SeatedPose(e->model(), *e->chair(), e->config().chair_placement, 0.005),
+                    obs.data());
+  }
+  const int end = TaskOf(*bonus).ClipEndStep();
+  int paid = 0, contact_before_end = 0;
+  for (int k = 0; k < end + 30; ++k) {
+    const float r0 = plain->Step(zero.data(), next.data()).reward;
+    const float r1 = bonus->Step(zero.data(), next.data()).reward;
+    const bool contact = bonus->PelvisSeatContact();
+    ASSERT_EQ(contact, plain->PelvisSeatContact()) << k;
+    const bool due = contact && TaskOf(*bonus).ClipEnded(bonus->episode_step());
+    EXPECT_NEAR(r1 - r0, due ? w : 0.0, 1e-5) << k;
+    EXPECT_EQ(TaskOf(*bonus).last_terms().contact, due ? w : 0.0) << k;
+    paid += due;
+    contact_before_end += contact && !due;
+  }
+  EXPECT_GT(paid, 10);                // the seated body stays on the seat past the clip's end
+  EXPECT_GT(contact_before_end, 10);  // contact alone, during the clip, earns nothing
+  EXPECT_EQ(SitTaskConfig().hold_contact_weight, 0.0);  // off in the paper's task
+}
+
 TEST(SitTask, TerminatesBelowItsOwnRootHeight) {
   // The start (root about 1.28 m) is above both thresholds; a threshold above it ends at once.
   std::vector<float> obs(57), next(57), zero(21, 0.0f);

@@ -31,6 +31,47 @@ TEST(TurnTask, FiftyDimensionalStateAndClipByName) {
   }
 }
 
+TEST(TurnTask, HeadingGoalIsTheReferenceHeadingRelativeToTheHumanoid) {
+  // Ours: the 52-d walk layout; its goal feature is the placed reference's heading (with the
+  // look-ahead) relative to the humanoid's yaw, at the reset and after every step.
+  for (double ahead : {0.0, 0.3}) {
+    SCOPED_TRACE(ahead);
+    auto env = MakeTurnEnv("turn_left", Json{{"heading_goal", true}, {"heading_lookahead_s", ahead}});
+    ASSERT_EQ(env->spec().obs_dim, 52);
+    EXPECT_EQ(env->spec().obs_slices.back().name, "goal");
+    std::vector<float> obs(52), zero(21, 0.0f);
+    env->Seed(5);
+    env->Reset(obs.data());
+    const TurnTask& t = TaskOf(*env);
+    double max_rel = 0;
+    for (int k = 0; k < 120; ++k) {
+      const double rel = AngleDiff(t.HeadingGoalYaw(env->episode_step()), env->RootRpy().z());
+      EXPECT_NEAR(obs[50], std::sin(rel), 1e-5) << k;
+      EXPECT_NEAR(obs[51], std::cos(rel), 1e-5) << k;
+      max_rel = std::max(max_rel, std::abs(rel));
+      if (env->Step(zero.data(), obs.data()).terminated) break;
+    }
+    EXPECT_GT(max_rel, 0.1);  // the reference turns away while the limp humanoid does not
+  }
+  // The look-ahead reads the clip further on: early in the turn the heading is further round.
+  auto env = MakeTurnEnv("turn_left", Json{{"heading_goal", true}, {"heading_lookahead_s", 0.5}});
+  std::vector<float> obs(52);
+  env->Seed(5);
+  env->Reset(obs.data());
+  const TurnTask& t = TaskOf(*env);
+  EXPECT_GT(AngleDiff(t.HeadingGoalYaw(30), RpyFromQuat(t.ReferenceAt(30).root_rot).z()), 0.2);
+  // Off by default: the paper's 50-d state; a 50-d layout with the goal on is refused by field.
+  EXPECT_EQ(MakeTurnEnv("turn_right")->spec().obs_dim, 50);
+  try {
+    TaskEnvConfig::FromJson(Json{{"task", "turn_left"}, {"chair", "none"}, {"obs_layout", "proprio"},
+                                 {"turn_left", {{"heading_goal", true}}}},
+                            "cfg");
+    ADD_FAILURE() << "accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("cfg.obs_layout"), std::string::npos) << e.what();
+  }
+}
+
 TEST(TurnTask, StartsAtFrameZeroOverTheOriginWithARandomYaw) {
   auto env = MakeTurnEnv("turn_left");
   std::vector<float> obs(env->spec().obs_dim);
