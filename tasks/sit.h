@@ -28,6 +28,11 @@ struct SitTaskConfig {
   // after the clip has ended. The success test is pelvis contact; tracking the seated pose alone
   // lets the policy rest on its thighs a few mm above the seat.
   double hold_contact_weight = 0.0;
+  // Ours (0 = the paper/authors): + w exp(-alpha d^2) per step after the clip, d the horizontal
+  // pelvis - seat target distance [m]; Eq. 7 stops at the clip's end and the pose terms do not
+  // see where on the seat the pelvis is.
+  double hold_seat_weight = 0.0;
+  double hold_seat_alpha = 200.0;  // [1/m^2]
   EnergyCostConfig energy;
   // Where the clip's last-frame pelvis lands, relative to the seat target, in the chair frame
   // (x forward from the seat, y to the chair's left) [m].
@@ -70,7 +75,8 @@ struct SitTaskConfig {
 };
 
 struct SitTerms {
-  double pose = 0, joint_vel = 0, similarity = 0, approach = 0, energy = 0, contact = 0, total = 0;
+  double pose = 0, joint_vel = 0, similarity = 0, approach = 0, energy = 0, contact = 0, seat = 0,
+         total = 0;
   double seat_distance_m = 0;  // 3-D pelvis - seat target
 };
 

@@ -194,6 +194,10 @@ class SitMetrics : public EpisodeMetrics {
       success_ = true;
       const Eigen::Vector3d d = env.PelvisPosition() - env.SeatTargetWorld();
       pos_err_cm_.push_back(100.0 * d.head<2>().norm());
+      // Signed, in the chair frame (x along the chair's facing direction, y to its left).
+      const double cy = SitTask::ChairYaw(env);
+      offset_x_cm_.push_back(100.0 * (std::cos(cy) * d.x() + std::sin(cy) * d.y()));
+      offset_y_cm_.push_back(100.0 * (-std::sin(cy) * d.x() + std::cos(cy) * d.y()));
       const double yaw = env.RootRpy().z();
       rot_err_deg_.push_back(std::abs(AngleDiff(yaw, SitTask::ChairYaw(env))) * 180.0 / M_PI);
       time_to_sit_s_.push_back(first_contact_s_);
@@ -209,6 +213,7 @@ class SitMetrics : public EpisodeMetrics {
   void AddSummary(Json* j) const override {
     (*j)["seat_position_error_cm_mean"] = MeanOf(pos_err_cm_);
     (*j)["seat_position_error_cm_p90"] = Percentile(pos_err_cm_, 0.9);
+    (*j)["seat_offset_cm_mean"] = {MeanOf(offset_x_cm_), MeanOf(offset_y_cm_)};
     (*j)["seat_orientation_error_deg_mean"] = MeanOf(rot_err_deg_);
     (*j)["seat_orientation_error_deg_p90"] = Percentile(rot_err_deg_, 0.9);
     (*j)["first_contact_s_mean"] = MeanOf(time_to_sit_s_);
@@ -226,6 +231,7 @@ class SitMetrics : public EpisodeMetrics {
   bool success_ = false;
   double min_dist_ = 0, first_contact_s_ = -1;
   std::vector<double> pos_err_cm_, rot_err_deg_, time_to_sit_s_, min_dists_;
+  std::vector<double> offset_x_cm_, offset_y_cm_;  // [cm] chair frame
 };
 
 }  // namespace

@@ -130,6 +130,36 @@ TEST(SitTask, HoldContactBonusIsPaidOnlyForPelvisContactAfterTheClip) {
   EXPECT_EQ(SitTaskConfig().hold_contact_weight, 0.0);  // off in the paper's task
 }
 
+TEST(SitTask, HoldSeatTermRewardsThePelvisNearTheSeatTargetAfterTheClip) {
+  const double w = 0.2, alpha = 200.0;
+  auto plain = MakeSitEnv(Json{{"reference_state_init", false}});
+  auto seat = MakeSitEnv(Json{{"reference_state_init", false},
+                              {"hold_seat_weight", w},
+                              {"hold_seat_alpha", alpha}});
+  std::vector<float> obs(57), next(57), zero(21, 0.0f);
+  for (auto* e : {plain.get(), seat.get()}) {
+    e->Seed(4);
+    e->Reset(obs.data());
+    e->ResetToState(SeatedPose(e->model(), *e->chair(), e->config().chair_placement, 0.005),
+                    obs.data());
+  }
+  const int end = TaskOf(*seat).ClipEndStep();
+  int paid = 0;
+  for (int k = 0; k < end + 20; ++k) {
+    const float r0 = plain->Step(zero.data(), next.data()).reward;
+    const float r1 = seat->Step(zero.data(), next.data()).reward;
+    const double d2 =
+        (seat->PelvisPosition() - seat->SeatTargetWorld()).head<2>().squaredNorm();
+    const bool after = TaskOf(*seat).ClipEnded(seat->episode_step());
+    const double want = after ? w * std::exp(-alpha * d2) : 0.0;
+    EXPECT_NEAR(r1 - r0, want, 1e-5) << k;
+    EXPECT_NEAR(TaskOf(*seat).last_terms().seat, want, 1e-9) << k;
+    paid += after && want > 1e-6;
+  }
+  EXPECT_GT(paid, 10);
+  EXPECT_EQ(SitTaskConfig().hold_seat_weight, 0.0);
+}
+
 TEST(SitTask, TerminatesBelowItsOwnRootHeight) {
   // The start (root about 1.28 m) is above both thresholds; a threshold above it ends at once.
   std::vector<float> obs(57), next(57), zero(21, 0.0f);
