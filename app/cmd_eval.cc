@@ -264,15 +264,17 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       const TaskEnvConfig config = TaskEnvConfig::FromJson(env, "--task chain");
       std::array<proto::ModelWeights, kNumSubtasks> models;
       std::array<std::string, kNumSubtasks> files;
+      std::array<Json, kNumSubtasks> saved;
       for (int id = 0; id < kNumSubtasks; ++id) {
         files[id] = ModelFile(ResolveProjectPath(chain->models[id]));
         models[id] = LoadModelFile(files[id]);
+        saved[id] = SavedConfig(ResolveProjectPath(chain->models[id]));
       }
       chain->options.episodes = o->eval.episodes;
       chain->options.seed = o->eval.seed;
       chain->options.stochastic = o->eval.stochastic;
       std::vector<PoseFrame> frames;
-      Json result = EvaluateChain(config, models, files, chain->options,
+      Json result = EvaluateChain(config, models, files, saved, chain->options,
                                   o->filmstrip.empty() ? nullptr : &frames);
       if (!o->filmstrip.empty()) {
         const Chair chair = Chair::Load(config.env.ChairPath());

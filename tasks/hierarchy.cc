@@ -3,9 +3,12 @@
 #include <algorithm>
 #include <cmath>
 
+#include "common/paths.h"
 #include "envs/spawn.h"
 #include "tasks/imitation.h"
+#include "tasks/task_env.h"
 #include "tasks/task_eval.h"
+#include "tasks/turn.h"
 
 namespace perch {
 
@@ -99,23 +102,58 @@ void SitChairTask::LoadMemory(const Json& j) {
 
 // ---- subtask policies -------------------------------------------------------------------------
 
-ObsLayout SubtaskPolicies::Layout(int id) {
-  return id == kWalk  ? ObsLayout::kProprioGoal
-         : id == kSit ? ObsLayout::kProprioChair
-                      : ObsLayout::kProprio;
+double TurnHeadingSource::GoalYaw(double yaw0, double t) const {
+  const double f = std::clamp((t + lookahead_s) / frame_time, 0.0,
+                              static_cast<double>(clip_yaw.size() - 1));
+  const int i = std::min(static_cast<int>(f), static_cast<int>(clip_yaw.size()) - 2);
+  const double w = f - i;
+  return yaw0 + (1.0 - w) * clip_yaw[i] + w * clip_yaw[i + 1] - clip_yaw[0];
+}
+
+std::unique_ptr<TurnHeadingSource> TurnHeadingSource::FromSavedConfig(const Json& experiment,
+                                                                      const std::string& ctx) {
+  if (!experiment.is_object() || !experiment.contains("env")) return nullptr;
+  const TaskEnvConfig c = TaskEnvConfig::FromJson(experiment["env"], ctx + ": saved config env");
+  if (c.env.task != "turn_left" && c.env.task != "turn_right") return nullptr;
+  const TurnTaskConfig& t = c.Section<TurnTaskConfig>();
+  if (!t.heading_goal) return nullptr;
+  const ReferenceMotion m = ReferenceMotion::Load(ResolveProjectPath(t.motion_file));
+  auto h = std::make_unique<TurnHeadingSource>();
+  h->frame_time = m.frame_time();
+  h->lookahead_s = t.heading_lookahead_s;
+  for (int i = 0; i < m.num_frames(); ++i) {
+    const double y = RpyFromQuat(m.frame(i).root_rot).z();
+    h->clip_yaw.push_back(i == 0 ? y : h->clip_yaw.back() + AngleDiff(y, h->clip_yaw.back()));
+  }
+  if (h->clip_yaw.size() < 2) throw ConfigError(ctx + ": turn clip " + t.motion_file + " too short");
+  return h;
+}
+
+ObsLayout SubtaskPolicies::Layout(int id) const {
+  return id == kWalk || heading_[id] != nullptr ? ObsLayout::kProprioGoal
+         : id == kSit                           ? ObsLayout::kProprioChair
+                                                : ObsLayout::kProprio;
 }
 
 SubtaskPolicies::SubtaskPolicies(const std::array<proto::ModelWeights, kNumSubtasks>& models,
-                                 const std::array<std::string, kNumSubtasks>& names) {
+                                 const std::array<std::string, kNumSubtasks>& names,
+                                 const std::array<Json, kNumSubtasks>& saved_configs) {
   for (int id = 0; id < kNumSubtasks; ++id) {
     const std::string ctx = std::string(SubtaskName(id)) + " policy " + names[id];
+    if (id == kLeftTurn || id == kRightTurn) {
+      heading_[id] = TurnHeadingSource::FromSavedConfig(saved_configs[id], ctx);
+    }
     const PolicyConfig pc = PolicyConfigFromShape(models[id].shape(), ctx);
     const int want = ObsLayoutDim(Layout(id));
     if (pc.kind != PolicyKind::kGaussian || pc.obs_dim != want || pc.act_dim != 21) {
+      std::string why = "the " + std::string(SubtaskName(id)) + " subtask needs a gaussian policy over " +
+                        std::to_string(want) + " observations and 21 torques";
+      if ((id == kLeftTurn || id == kRightTurn) && pc.obs_dim == 52 && heading_[id] == nullptr) {
+        why += " (a 52-input turn needs its saved config with heading_goal: a checkpoint, not a "
+               "bare policy file)";
+      }
       throw ConfigError(ctx + ": observes " + std::to_string(pc.obs_dim) + " and acts " +
-                        std::to_string(pc.act_dim) + ", the " + SubtaskName(id) +
-                        " subtask needs a gaussian policy over " + std::to_string(want) +
-                        " observations and 21 torques");
+                        std::to_string(pc.act_dim) + ", " + why);
     }
     runners_[id] = std::make_unique<PolicyRunner>(pc, NormalizerConfig());
     runners_[id]->LoadWeights(models[id]);
@@ -125,9 +163,21 @@ SubtaskPolicies::SubtaskPolicies(const std::array<proto::ModelWeights, kNumSubta
   obs_.resize(57);
 }
 
+void SubtaskPolicies::Begin(int id, const HumanoidChairEnv& env) {
+  begin_step_[id] = env.episode_step();
+  begin_yaw_[id] = env.RootRpy().z();
+}
+
 void SubtaskPolicies::Act(int id, const HumanoidChairEnv& env, Rng& rng, bool deterministic,
                           float* action) {
   env.WriteObservation(Layout(id), obs_.data());
+  if (heading_[id] != nullptr) {
+    // The goal slots read the turn's reference heading instead of the walk target.
+    const double t = (env.episode_step() - begin_step_[id]) * env.spec().control_dt;
+    const double rel = AngleDiff(heading_[id]->GoalYaw(begin_yaw_[id], t), env.RootRpy().z());
+    obs_[50] = static_cast<float>(std::sin(rel));
+    obs_[51] = static_cast<float>(std::cos(rel));
+  }
   runners_[id]->Act(obs_.data(), rng, deterministic, nullptr, action);
 }
 
@@ -135,12 +185,13 @@ void SubtaskPolicies::Act(int id, const HumanoidChairEnv& env, Rng& rng, bool de
 
 Json EvaluateChain(const TaskEnvConfig& config,
                    const std::array<proto::ModelWeights, kNumSubtasks>& models,
-                   const std::array<std::string, kNumSubtasks>& paths, const ChainOptions& o,
+                   const std::array<std::string, kNumSubtasks>& paths, 
+                   const std::array<Json, kNumSubtasks>& saved_configs, const ChainOptions& o,
                    std::vector<PoseFrame>* frames) {
   if (config.env.task != "sit_chair") {
     throw ConfigError("chain: needs the sit_chair env task, got \"" + config.env.task + "\"");
   }
-  SubtaskPolicies policies(models, paths);
+  SubtaskPolicies policies(models, paths, saved_configs);
   std::unique_ptr<HumanoidChairEnv> env = MakeTaskHumanoidEnv(config);
   auto& task = const_cast<SitChairTask&>(dynamic_cast<const SitChairTask&>(env->task()));
   const double dt = env->spec().control_dt;
@@ -158,7 +209,7 @@ Json EvaluateChain(const TaskEnvConfig& config,
     env->Reset(obs.data());
     const Eigen::Vector2d target = env->SeatTargetWorld().head<2>() + o.approach_dist_m * facing;
     env->SetWalkTarget(target);
-    int phase = kWalk, phase_start = 0, run = 0;
+    int phase = kWalk, phase_start = 0, run = 0, begun = -1;
     double min_dist = env->PelvisSeatDistance();
     bool success = false, fell = false;
     for (int k = 0; k < max_steps; ++k) {
@@ -178,6 +229,10 @@ Json EvaluateChain(const TaskEnvConfig& config,
         phase_start = k;
       }
       task.set_active(phase);
+      if (phase != begun) {
+        policies.Begin(phase, *env);
+        begun = phase;
+      }
       if (e == 0 && frames != nullptr) {
         const HumanoidState& s = env->humanoid_state();
         PoseFrame f;

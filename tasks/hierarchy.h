@@ -3,7 +3,7 @@
 //    reward per control step, termination at root < 0.78 m (< 0.54 m while sit is active), the
 //    authors' 990-step episode. The env task of the meta controller and of the scripted chain.
 //  * SubtaskPolicies: the four frozen subtask policies, each with its own frozen normaliser, run
-//    on their own observation layouts of the same env (walk 52, turns 50, sit 57).
+//    on their own observation layouts of the same env (walk 52, turns 50 or 52, sit 57).
 //  * The scripted chain (issue 14): walk to a point in front of the seat, turn to the side that
 //    faces away from the chair, sit; no meta policy. The floor the meta controller must beat.
 #pragma once
@@ -70,19 +70,42 @@ class SitChairTask : public Task {
   double spawn_theta_ = 0.0;
 };
 
+// A turn trained with `heading_goal` (docs/subtasks.md) observes the reference heading: in the
+// hierarchy it is the turn clip's yaw change since the turn began, added to the humanoid's yaw
+// at that moment, read heading_lookahead_s ahead.
+struct TurnHeadingSource {
+  std::vector<double> clip_yaw;  // [frame] unwrapped root yaw of the clip [rad]
+  double frame_time = 0.0;       // [s]
+  double lookahead_s = 0.0;      // [s]
+  // Goal yaw [rad] t seconds after the turn began with the humanoid at yaw0.
+  double GoalYaw(double yaw0, double t) const;
+  // From a turn model's saved experiment config; null when the turn has no heading goal.
+  static std::unique_ptr<TurnHeadingSource> FromSavedConfig(const Json& experiment,
+                                                            const std::string& ctx);
+};
+
 // Four frozen subtask policies over one env.
 class SubtaskPolicies {
  public:
   // models in SubtaskId order; each must observe its layout (ConfigError naming the subtask and
-  // the file otherwise).
+  // the file otherwise). saved_configs (the experiment config saved with each model, may be null
+  // JSON) tell a heading-goal turn (52 inputs) from the paper's (50).
   SubtaskPolicies(const std::array<proto::ModelWeights, kNumSubtasks>& models,
-                  const std::array<std::string, kNumSubtasks>& names_for_errors);
+                  const std::array<std::string, kNumSubtasks>& names_for_errors,
+                  const std::array<Json, kNumSubtasks>& saved_configs = {});
+  // Subtask `id` becomes active now (a heading-goal turn starts its clip clock).
+  void Begin(int id, const HumanoidChairEnv& env);
   // The action of subtask `id` on the env's current state (its own observation and normaliser).
   void Act(int id, const HumanoidChairEnv& env, Rng& rng, bool deterministic, float* action);
-  static ObsLayout Layout(int id);
+  // The layout subtask `id` observes (with this set of models).
+  ObsLayout Layout(int id) const;
+  bool heading_goal(int id) const { return heading_[id] != nullptr; }
 
  private:
   std::array<std::unique_ptr<PolicyRunner>, kNumSubtasks> runners_;
+  std::array<std::unique_ptr<TurnHeadingSource>, kNumSubtasks> heading_;
+  std::array<int, kNumSubtasks> begin_step_{};
+  std::array<double, kNumSubtasks> begin_yaw_{};
   std::vector<float> obs_;
 };
 
@@ -101,7 +124,8 @@ struct ChainOptions {
 // active subtask) go to `frames` when not null.
 Json EvaluateChain(const TaskEnvConfig& config,
                    const std::array<proto::ModelWeights, kNumSubtasks>& models,
-                   const std::array<std::string, kNumSubtasks>& model_paths, const ChainOptions& o,
+                   const std::array<std::string, kNumSubtasks>& model_paths, 
+                   const std::array<Json, kNumSubtasks>& saved_configs, const ChainOptions& o,
                    std::vector<PoseFrame>* frames);
 
 }  // namespace perch

@@ -17,7 +17,7 @@ proto::ModelWeights Untrained(int obs_dim, uint64_t seed) {
 std::array<proto::ModelWeights, kNumSubtasks> UntrainedSet() {
   std::array<proto::ModelWeights, kNumSubtasks> m;
   for (int id = 0; id < kNumSubtasks; ++id) {
-    m[id] = Untrained(ObsLayoutDim(SubtaskPolicies::Layout(id)), id + 1);
+    m[id] = Untrained(id == kWalk ? 52 : id == kSit ? 57 : 50, id + 1);
   }
   return m;
 }
@@ -103,13 +103,65 @@ TEST(Hierarchy, ScriptedChainIsReproducibleAndUntrainedSubtasksNeverSit) {
   std::vector<PoseFrame> frames;
   const auto models = UntrainedSet();
   const std::array<std::string, kNumSubtasks> names = {"l", "r", "s", "w"};
-  const Json a = EvaluateChain(SitChair(1), models, names, o, &frames);
-  const Json b = EvaluateChain(SitChair(1), models, names, o, nullptr);
+  const Json a = EvaluateChain(SitChair(1), models, names, {}, o, &frames);
+  const Json b = EvaluateChain(SitChair(1), models, names, {}, o, nullptr);
   EXPECT_EQ(a.dump(), b.dump());
   EXPECT_EQ(a["success_rate"].get<double>(), 0.0);
   EXPECT_GT(a["min_dist_mean_m"].get<double>(), 0.3);
   ASSERT_FALSE(frames.empty());
   EXPECT_EQ(frames.front().label, "walk");
+}
+
+Json HeadingTurnExperiment(const std::string& task, double lookahead) {
+  return Json{{"env",
+               {{"task", task},
+                {"chair", "none"},
+                {task, {{"heading_goal", true}, {"heading_lookahead_s", lookahead}}}}}};
+}
+
+TEST(Hierarchy, HeadingGoalTurnsReadTheirClipFromTheSavedConfig) {
+  // A 52-input turn with its saved config observes the walk layout; its goal follows the clip's
+  // yaw change since the turn began, from the humanoid's yaw at that moment.
+  const auto h = TurnHeadingSource::FromSavedConfig(HeadingTurnExperiment("turn_left", 0.0), "t");
+  ASSERT_NE(h, nullptr);
+  EXPECT_NEAR(h->GoalYaw(0.7, 0.0), 0.7, 1e-12);
+  const double end = h->GoalYaw(0.7, 10.0) - 0.7;  // held at the last frame
+  EXPECT_NEAR(end * 180.0 / M_PI, 180.0, 8.0) << "the left clip turns about half round";
+  const auto r = TurnHeadingSource::FromSavedConfig(HeadingTurnExperiment("turn_right", 0.3), "t");
+  ASSERT_NE(r, nullptr);
+  EXPECT_LT(r->GoalYaw(0.0, 10.0), -2.9);
+  // The look-ahead reads further along: 0.3 s ahead at t equals no look-ahead at t + 0.3.
+  const auto r0 = TurnHeadingSource::FromSavedConfig(HeadingTurnExperiment("turn_right", 0.0), "t");
+  EXPECT_NEAR(r->GoalYaw(0.2, 1.0), r0->GoalYaw(0.2, 1.3), 1e-9);
+  // A paper turn (no heading goal) or another task has none.
+  EXPECT_EQ(TurnHeadingSource::FromSavedConfig(
+                Json{{"env", {{"task", "turn_left"}, {"chair", "none"}}}}, "t"),
+            nullptr);
+  EXPECT_EQ(TurnHeadingSource::FromSavedConfig(Json(), "t"), nullptr);
+
+  auto models = UntrainedSet();
+  models[kLeftTurn] = Untrained(52, 11);
+  std::array<Json, kNumSubtasks> saved;
+  saved[kLeftTurn] = HeadingTurnExperiment("turn_left", 0.3);
+  SubtaskPolicies p(models, {"l.bin", "r.bin", "s.bin", "w.bin"}, saved);
+  EXPECT_TRUE(p.heading_goal(kLeftTurn));
+  EXPECT_FALSE(p.heading_goal(kRightTurn));
+  EXPECT_EQ(p.Layout(kLeftTurn), ObsLayout::kProprioGoal);
+  EXPECT_EQ(p.Layout(kRightTurn), ObsLayout::kProprio);
+  // Without the saved config a 52-input turn is refused, and the message says why.
+  try {
+    SubtaskPolicies q(models, {"l.bin", "r.bin", "s.bin", "w.bin"});
+    ADD_FAILURE() << "accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("heading_goal"), std::string::npos) << e.what();
+  }
+  // The chain runs with it, reproducibly.
+  ChainOptions o;
+  o.episodes = 1;
+  o.seed = 2;
+  const std::array<std::string, kNumSubtasks> names = {"l", "r", "s", "w"};
+  EXPECT_EQ(EvaluateChain(SitChair(1), models, names, saved, o, nullptr).dump(),
+            EvaluateChain(SitChair(1), models, names, saved, o, nullptr).dump());
 }
 
 }  // namespace
