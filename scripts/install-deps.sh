@@ -14,6 +14,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libpng-dev zlib1g-dev
   libssl-dev
+  nodejs chromium fonts-dejavu-core
   iproute2 procps
 )
 
