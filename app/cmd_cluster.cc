@@ -868,20 +868,32 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
 
   // perch run-summary
   struct SummaryFlags {
-    std::string run_dir, csv;
+    std::vector<std::string> run_dirs;
+    std::string csv, plot;
     bool json = false;
   };
   auto sf = std::make_shared<SummaryFlags>();
   CLI::App* s = root.add_subcommand(
       "run-summary", "What a training run did: samples, wall time, throughput, learning curve");
-  s->add_option("--run-dir", sf->run_dir, "the run directory (metrics.jsonl)")->required();
-  s->add_option("--csv", sf->csv, "write the learning curve here as CSV");
+  s->add_option("--run-dir", sf->run_dirs,
+                "the run directory (metrics.jsonl); several (repeat the flag) overlay in --plot")
+      ->required();
+  s->add_option("--csv", sf->csv, "write the learning curve here as CSV (the first run)");
+  s->add_option("--plot", sf->plot,
+                "draw the learning curves of all --run-dir runs into this PNG (gnuplot)");
   s->add_flag("--json", sf->json, "print one JSON object");
   s->callback([sf] {
-    const RunSummary summary = SummarizeRun(sf->run_dir);
+    std::vector<RunSummary> runs;
+    for (const std::string& d : sf->run_dirs) runs.push_back(SummarizeRun(d));
+    if (runs.size() > 1 && sf->plot.empty()) {
+      throw ConfigError("--run-dir: several runs need --plot (the summary is of one run)");
+    }
+    const RunSummary& summary = runs.front();
     if (!sf->csv.empty()) WriteCurveCsv(summary, sf->csv);
+    if (!sf->plot.empty()) PlotRuns(runs, sf->plot);
     Json j = ToJson(summary);
     if (!sf->csv.empty()) j["csv"] = sf->csv;
+    if (!sf->plot.empty()) j["plot"] = sf->plot;
     if (sf->json) {
       std::cout << j.dump() << "\n";
     } else {

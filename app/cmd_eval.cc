@@ -178,7 +178,9 @@ struct ChainFlags {
 void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   struct EvalOpts {
     ConfigOverrides cfg;
-    std::string model, filmstrip;
+    std::string model, filmstrip, record;
+    int record_episodes = 0;
+    bool force = false;
     EvalOptions eval;
     int frames = 6;
     int panel_px = 220;
@@ -238,6 +240,14 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       ->check(CLI::Range(64, 1024));
   cmd->add_flag("--fixed-window", o->fixed_window,
                 "one world window for all panels (default: each panel follows the humanoid)");
+  cmd->add_option("--record", o->record,
+                  "write the episodes as a recording (docs/recording.md) for perch view and "
+                  "perch export-bvh");
+  cmd->add_option("--record-episodes", o->record_episodes,
+                  "record only the first K episodes (0: all)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 1000000));
+  cmd->add_flag("--force", o->force, "overwrite an existing --record file");
   cmd->add_flag("--json", o->json, "print one JSON object on stdout");
   auto chain = std::make_shared<ChainFlags>();
   cmd->add_option("--zone", chain->zone, "chain: spawn zone (1 easy, 2 lateral, 3 rear)")
@@ -252,6 +262,31 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         ->capture_default_str();
   }
   cmd->callback([o, chain]() {
+    // --record: checked before the (long) evaluation, written after it.
+    std::unique_ptr<EpisodeRecorder> recorder;
+    if (!o->record.empty()) {
+      if (o->cfg.chair == "all") throw ConfigError("--record: not with --chair all");
+      if (!o->force && std::filesystem::exists(o->record)) {
+        throw ConfigError("--record " + o->record + ": exists; not overwritten (--force)");
+      }
+      recorder = std::make_unique<EpisodeRecorder>(o->record_episodes);
+      o->eval.recorder = recorder.get();
+      chain->options.recorder = recorder.get();
+    }
+    auto write_recording = [&](const std::string& task, const std::string& model,
+                               const Json& config) {
+      if (!recorder) return;
+      proto::Recording& r = recorder->recording();
+      r.set_task(task);
+      r.set_model(model);
+      r.set_config_json(config.dump());
+      r.set_seed(o->eval.seed);
+      r.set_stochastic(o->eval.stochastic);
+      r.set_perch_version(PerchVersion());
+      WriteRecording(o->record, r, o->force);
+      std::cerr << "eval: recording of " << r.episodes_size() << " episodes -> " << o->record
+                << "\n";
+    };
     if (o->cfg.task == "chain") {
       // The scripted chain: four subtask policies on the sit_chair env, no meta policy.
       Json env{{"task", "sit_chair"},
@@ -276,6 +311,9 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       std::vector<PoseFrame> frames;
       Json result = EvaluateChain(config, models, files, saved, chain->options,
                                   o->filmstrip.empty() ? nullptr : &frames);
+      std::string all_models;
+      for (const std::string& f : files) all_models += (all_models.empty() ? "" : ",") + f;
+      write_recording("chain", all_models, config.ToJson());
       if (!o->filmstrip.empty()) {
         const Chair chair = Chair::Load(config.env.ChairPath());
         const HumanoidModel model = HumanoidModel::Load(config.env.HumanoidPath());
@@ -331,6 +369,8 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       return;
     }
     Json result = def.evaluate(config, weights, o->eval, o->filmstrip.empty() ? nullptr : &rec);
+    write_recording(config.env.task, model_file, config.ToJson());
+    if (recorder) result["recording"] = o->record;
     result["model"] = model_file;
     result["config"] = config.ToJson();
     if (!o->filmstrip.empty()) {

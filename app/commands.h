@@ -14,5 +14,6 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench);  // app/cmd_clust
 void RegisterVizCommands(CLI::App& root, CLI::App& bench);      // app/cmd_viz.cc
 void RegisterEvalCommands(CLI::App& root, CLI::App& bench);     // app/cmd_eval.cc
 void RegisterProfileCommands(CLI::App& root, CLI::App& bench);  // app/cmd_profile.cc
+void RegisterViewCommands(CLI::App& root, CLI::App& bench);     // app/cmd_view.cc
 
 }  // namespace perch

@@ -20,6 +20,7 @@ int main(int argc, char** argv) {
   perch::RegisterVizCommands(app, *bench);
   perch::RegisterEvalCommands(app, *bench);
   perch::RegisterProfileCommands(app, *bench);
+  perch::RegisterViewCommands(app, *bench);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

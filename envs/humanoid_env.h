@@ -45,6 +45,8 @@ class Task {
   virtual TaskStep OnStep(const HumanoidChairEnv& env, const float* action) = 0;
   // The task's per-episode memory as JSON, and back (start-state banks): with the env's EnvState
   // it continues an episode from a saved point. Tasks without memory keep the defaults.
+  // The last step's named reward terms (recordings, diagnostics); tasks without terms: {}.
+  virtual Json LastRewardTerms() const { return Json::object(); }
   virtual Json SaveMemory() const { return Json::object(); }
   virtual void LoadMemory(const Json& memory) {}
 };

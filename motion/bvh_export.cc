@@ -1,7 +1,12 @@
 #include "motion/bvh_export.h"
 
 #include <cmath>
+#include <Eigen/Geometry>
+#include <Eigen/QR>
 #include <functional>
+#include <vector>
+
+#include "common/json_util.h"
 
 namespace perch {
 namespace {
@@ -75,6 +80,53 @@ BvhClip HumanoidMotionToBvh(const HumanoidModel& model, const ReferenceMotion& m
     }
   }
   return clip;
+}
+
+std::vector<double> HumanoidJointAnglesFromBvh(const HumanoidModel& model, const BvhClip& clip,
+                                               int frame) {
+  const BvhPose pose = BvhForwardKinematics(clip, frame);
+  const Eigen::Matrix3d qm = Q();
+  std::vector<double> q(model.num_joints(), 0.0);
+  for (int b = 0; b < model.num_bodies(); ++b) {
+    const Body& body = model.body(b);
+    if (body.joints.empty()) continue;
+    const int j = clip.Find(body.name);
+    const int pj = body.parent < 0 ? -1 : clip.Find(model.body(body.parent).name);
+    if (j < 0 || (body.parent >= 0 && pj < 0)) {
+      throw ConfigError("BVH: no joint named \"" + body.name + "\" (not the humanoid's skeleton)");
+    }
+    const Eigen::Matrix3d local_bvh =
+        pj < 0 ? pose.rot[j] : Eigen::Matrix3d(pose.rot[pj].transpose() * pose.rot[j]);
+    // Back to humanoid axes, then remove the body's fixed orientation: M = prod_k R(u_k, q_k).
+    const Eigen::Matrix3d m =
+        body.orientation.toRotationMatrix().transpose() * (qm.transpose() * local_bvh * qm);
+    const int n = static_cast<int>(body.joints.size());
+    auto product = [&](const Eigen::VectorXd& a) {
+      Eigen::Matrix3d r = Eigen::Matrix3d::Identity();
+      for (int k = 0; k < n; ++k) {
+        r = r * Eigen::AngleAxisd(a[k], model.joint(body.joints[k]).axis).toRotationMatrix();
+      }
+      return r;
+    };
+    auto residual = [&](const Eigen::VectorXd& a) {
+      const Eigen::AngleAxisd err(Eigen::Matrix3d(m.transpose() * product(a)));
+      return Eigen::Vector3d(err.angle() * err.axis());
+    };
+    Eigen::VectorXd a = Eigen::VectorXd::Zero(n);
+    for (int it = 0; it < 50; ++it) {
+      const Eigen::Vector3d r = residual(a);
+      if (r.norm() < 1e-12) break;
+      Eigen::MatrixXd jac(3, n);
+      for (int k = 0; k < n; ++k) {
+        Eigen::VectorXd h = a;
+        h[k] += 1e-7;
+        jac.col(k) = (residual(h) - r) / 1e-7;
+      }
+      a -= jac.colPivHouseholderQr().solve(r);
+    }
+    for (int k = 0; k < n; ++k) q[body.joints[k]] = a[k];
+  }
+  return q;
 }
 
 }  // namespace perch

@@ -16,6 +16,13 @@ namespace perch {
 BvhClip HumanoidMotionToBvh(const HumanoidModel& model, const ReferenceMotion& motion,
                             double frame_time, double seconds);
 
+// The humanoid's joint angles [num_joints, observation order, rad] of one frame of a BVH written by
+// HumanoidMotionToBvh (or edited in a tool that keeps its skeleton): each body's rotation relative
+// to its parent, read from the BVH, is decomposed into the rotations about its hinge axes
+// (Gauss-Newton per body). For round-trip checks and for importing edited motions.
+std::vector<double> HumanoidJointAnglesFromBvh(const HumanoidModel& model, const BvhClip& clip,
+                                               int frame);
+
 // humanoid world (z up) -> BVH axes (y up).
 Eigen::Vector3d HumanoidToBvhAxes(const Eigen::Vector3d& v);
 

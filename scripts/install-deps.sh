@@ -15,8 +15,13 @@ PACKAGES=(
   libpng-dev zlib1g-dev
   libssl-dev
   nodejs chromium fonts-dejavu-core
+  libcpp-httplib-dev gnuplot-nox
   iproute2 procps
 )
+
+# Debian's nodejs leaves npm to its own package; a NodeSource nodejs brings npm and conflicts
+# with Debian's npm, so it is added only when no npm is on the PATH.
+if ! command -v npm >/dev/null 2>&1; then PACKAGES+=(npm); fi
 
 missing=()
 for p in "${PACKAGES[@]}"; do

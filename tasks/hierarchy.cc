@@ -210,6 +210,11 @@ Json EvaluateChain(const TaskEnvConfig& config,
     const Eigen::Vector2d target = env->SeatTargetWorld().head<2>() + o.approach_dist_m * facing;
     env->SetWalkTarget(target);
     int phase = kWalk, phase_start = 0, run = 0, begun = -1;
+    if (o.recorder != nullptr) {
+      RecordingExtras x;
+      x.active_subtask = phase;
+      o.recorder->Begin(*env, e, 2 * episode_seed, x);
+    }
     double min_dist = env->PelvisSeatDistance();
     bool success = false, fell = false;
     for (int k = 0; k < max_steps; ++k) {
@@ -245,6 +250,11 @@ Json EvaluateChain(const TaskEnvConfig& config,
       }
       policies.Act(phase, *env, act_rng, !o.stochastic, action.data());
       const StepResult r = env->Step(action.data(), obs.data());
+      if (o.recorder != nullptr) {
+        RecordingExtras x;
+        x.active_subtask = phase;
+        o.recorder->Step(*env, r, x);
+      }
       min_dist = std::min(min_dist, env->PelvisSeatDistance());
       run = env->PelvisSeatContact() ? run + 1 : 0;
       if (!success && run >= need) {
@@ -257,6 +267,7 @@ Json EvaluateChain(const TaskEnvConfig& config,
       }
     }
     successes += success;
+    if (o.recorder != nullptr) o.recorder->End(success, fell);
     falls += fell;
     min_dists.push_back(min_dist);
   }

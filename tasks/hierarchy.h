@@ -18,6 +18,7 @@
 #include "envs/humanoid_env.h"
 #include "learner/policy.h"
 #include "tasks/clip_task.h"
+#include "tasks/recording.h"
 #include "tasks/task_env.h"
 #include "viz/filmstrip.h"
 
@@ -117,6 +118,7 @@ struct ChainOptions {
   double reach_m = 0.25;         // walk -> turn when body_xyz is this close to the target
   double max_walk_s = 8.0;       // walk -> turn at the latest
   double turn_s = 3.2;           // turn -> sit after this long (the turn clips last 2.9 s)
+  EpisodeRecorder* recorder = nullptr;  // perch eval --record (not owned)
 };
 
 // Runs the chain over seeded episodes; JSON: success_rate, success_ci95, min_dist_mean_m,

@@ -46,6 +46,7 @@ TaskDef WalkDef() {
     wo.stochastic = o.stochastic;
     wo.no_fall_s = o.no_fall_s;
     wo.foot_sliding = o.foot_sliding;
+    wo.recorder = o.recorder;
     WalkEvalRecording wr;
     Json j = EvaluateWalk(c, w, wo, rec != nullptr ? &wr : nullptr);
     if (rec != nullptr) {

@@ -91,6 +91,13 @@ class SitTask : public ClipTask {
 
   const SitTaskConfig& config() const { return c_; }
   const SitTerms& last_terms() const { return terms_; }
+  Json LastRewardTerms() const override {
+    const SitTerms& t = terms_;
+    return Json{{"pose", t.pose},         {"joint_vel", t.joint_vel}, {"similarity", t.similarity},
+                {"approach", t.approach}, {"energy", t.energy},       {"contact", t.contact},
+                {"seat", t.seat},         {"total", t.total},
+                {"seat_distance_m", t.seat_distance_m}};
+  }
   // The placement of the clip for a chair: facing the chair's front, pelvis end over the seat.
   ClipPlacement PlacementFor(const HumanoidChairEnv& env) const;
   // Facing direction of the chair (its +x axis) in the world [rad].

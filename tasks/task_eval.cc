@@ -49,6 +49,7 @@ Json EvaluateEpisodes(const TaskEnvConfig& config, const proto::ModelWeights& we
     Rng act_rng(2 * episode_seed + 1);
     env->Reset(obs.data());
     metrics->Start(*env);
+    if (o.recorder != nullptr) o.recorder->Begin(*env, e, 2 * episode_seed);
     auto record = [&](int step) {
       if (e != 0 || rec == nullptr) return;
       const HumanoidState& s = env->humanoid_state();
@@ -72,6 +73,7 @@ Json EvaluateEpisodes(const TaskEnvConfig& config, const proto::ModelWeights& we
         sum_sim += metrics->ImitationReward(*env);
         metrics->Observe(*env, r);
       }
+      if (o.recorder != nullptr) o.recorder->Step(*env, r);
       record(steps);
       obs.swap(next);
       if (r.terminated) {
@@ -85,7 +87,9 @@ Json EvaluateEpisodes(const TaskEnvConfig& config, const proto::ModelWeights& we
       fall_times.push_back(steps * dt);
       fall_episodes.push_back(e);
     }
-    if (metrics->Finish(*env, fell)) ++successes;
+    const bool success = metrics->Finish(*env, fell);
+    successes += success;
+    if (o.recorder != nullptr) o.recorder->End(success, fell);
     steps_total += steps;
   }
   const double n = o.episodes;

@@ -13,6 +13,7 @@
 #include "common/proto/model.pb.h"
 #include "envs/humanoid_env.h"
 #include "tasks/foot_sliding.h"
+#include "tasks/recording.h"
 #include "tasks/task_env.h"
 #include "viz/filmstrip.h"
 
@@ -24,6 +25,7 @@ struct EvalOptions {
   bool stochastic = false;  // default: the Gaussian's mean
   double no_fall_s = 10.0;  // walk: an episode counts as no-fall if it stays up this long [s]
   FootSlidingOptions foot_sliding;
+  EpisodeRecorder* recorder = nullptr;  // perch eval --record (not owned)
 };
 
 // Episode 0, for the filmstrip.

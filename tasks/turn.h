@@ -82,6 +82,13 @@ class TurnTask : public ClipTask {
   // The placed reference's yaw at control step k (+ the heading look-ahead) [rad].
   double HeadingGoalYaw(int k) const;
   const TurnTerms& last_terms() const { return terms_; }
+  Json LastRewardTerms() const override {
+    const TurnTerms& t = terms_;
+    return Json{{"pose", t.pose},       {"joint_vel", t.joint_vel},
+                {"similarity", t.similarity}, {"rotation", t.rotation},
+                {"root_vel", t.root_vel}, {"energy", t.energy},
+                {"total", t.total},     {"yaw_error_rad", t.yaw_error_rad}};
+  }
   // The step at which success is judged (clip end + success_after_end_s).
   int SuccessStep() const;
 

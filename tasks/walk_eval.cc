@@ -139,6 +139,7 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
     const double x0 = env->humanoid_state().root_pos.x();
     int open_bin = target_bin();
     sliding_meter.Start(body_pose);
+    if (o.recorder != nullptr) o.recorder->Begin(*env, e, 2 * episode_seed);
     auto record = [&](int step) {
       if (e != 0 || rec == nullptr) return;
       const HumanoidState& s = env->humanoid_state();
@@ -181,6 +182,7 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
         }
         sliding_meter.Observe(body_pose, dt);
       }
+      if (o.recorder != nullptr) o.recorder->Step(*env, r);
       record(steps);
       obs.swap(next);
       if (r.terminated) {
@@ -200,6 +202,7 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
       }
     }
     if (!fell || steps >= no_fall_steps) ++no_fall;
+    if (o.recorder != nullptr) o.recorder->End(!fell || steps >= no_fall_steps, fell);
     steps_total += steps;
     sum_forward += (env->humanoid_state().root_pos.x() - x0) / (steps * dt);
   }

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "tasks/recording.h"
 #include "common/json_util.h"
 #include "common/proto/model.pb.h"
 #include "learner/policy.h"
@@ -26,6 +27,7 @@ struct WalkEvalOptions {
   bool stochastic = false;  // default: the Gaussian's mean
   double no_fall_s = 10.0;  // an episode counts as no-fall if it stays up this long [s]
   FootSlidingOptions foot_sliding;
+  EpisodeRecorder* recorder = nullptr;  // perch eval --record (not owned)
 };
 
 // Episode 0, for the filmstrip.

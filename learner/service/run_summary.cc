@@ -1,6 +1,10 @@
 #include "learner/service/run_summary.h"
 
+#include <stdlib.h>
+
 #include <algorithm>
+#include <cstdlib>
+#include <iterator>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -50,6 +54,12 @@ RunSummary SummarizeRun(const std::string& run_dir) {
     r.samples_per_s = Num(row, "samples_per_s", where);
     r.policy_lag_mean = Num(row, "policy_lag_mean", where);
     r.actors = row.value("actors", 0);
+    if (row.contains("episodes") && row["episodes"].is_number()) {
+      r.episodes = row["episodes"].get<int64_t>();
+    }
+    if (row.contains("episodes_terminated") && row["episodes_terminated"].is_number()) {
+      r.episodes_terminated = row["episodes_terminated"].get<int64_t>();
+    }
     r.has_episodes = row.contains("return_mean") && row["return_mean"].is_number();
     if (r.has_episodes) {
       r.return_mean = row["return_mean"].get<double>();
@@ -119,6 +129,66 @@ Json ToJson(const RunSummary& s) {
                {{"updates_averaged", n},
                 {"return_mean", n ? Json(ret / n) : Json(nullptr)},
                 {"episode_length_mean", n ? Json(len / n) : Json(nullptr)}}}};
+}
+
+void PlotRuns(const std::vector<RunSummary>& runs, const std::string& png_path) {
+  if (runs.empty()) throw ConfigError("plot: no runs");
+  namespace fs = std::filesystem;
+  char tmpl[] = "/tmp/perch-plot-XXXXXX";
+  if (::mkdtemp(tmpl) == nullptr) throw ConfigError("plot: cannot make a temporary directory");
+  const fs::path dir(tmpl);
+  // One whitespace-separated data file per run: samples (M), hours, return, length, fall rate,
+  // samples/s ("NaN" where a batch ended no episode, which gnuplot skips).
+  std::vector<std::string> files;
+  for (size_t i = 0; i < runs.size(); ++i) {
+    const fs::path f = dir / ("run" + std::to_string(i) + ".dat");
+    std::ofstream o(f);
+    for (const CurveRow& r : runs[i].curve) {
+      o << r.samples / 1e6 << ' ' << r.time_s / 3600.0 << ' ';
+      if (r.has_episodes) o << r.return_mean << ' ' << r.episode_length_mean << ' ';
+      else o << "NaN NaN ";
+      if (r.episodes > 0) o << static_cast<double>(r.episodes_terminated) / r.episodes << ' ';
+      else o << "NaN ";
+      o << r.samples_per_s << '\n';
+    }
+    files.push_back(f.string());
+  }
+  std::ostringstream g;
+  g << "set terminal pngcairo size 1400,1400 font ',10'\n"
+    << "set output '" << png_path << ".tmp'\n"
+    << "set datafile missing 'NaN'\nset grid\nset key bottom right\n"
+    << "set multiplot layout 4,2 title 'Perch learning curves'\n";
+  const char* names[4] = {"return (episode mean)", "episode length (control steps)",
+                          "fall rate (terminated / ended)", "samples/s"};
+  const int cols[4] = {3, 4, 5, 6};
+  for (int k = 0; k < 4; ++k) {
+    for (int x = 0; x < 2; ++x) {
+      g << "set xlabel '" << (x == 0 ? "samples (M)" : "wall time (h)") << "'\nset ylabel '"
+        << names[k] << "'\nplot ";
+      for (size_t i = 0; i < files.size(); ++i) {
+        std::string label = runs[i].run_dir;
+        for (char& c : label) {
+          if (c == '_' || c == '\'') c = ' ';  // gnuplot's enhanced text, quoting
+        }
+        g << (i ? ", " : "") << "'" << files[i] << "' using " << (x + 1) << ":" << cols[k]
+          << " with lines lw 1.5 title '" << label << "'";
+      }
+      g << "\n";
+    }
+  }
+  g << "unset multiplot\nset output\n";
+  const fs::path script = dir / "plot.gp";
+  std::ofstream(script) << g.str();
+  const std::string cmd = "gnuplot '" + script.string() + "' 2>" + (dir / "gnuplot.err").string();
+  const int rc = std::system(cmd.c_str());
+  std::ifstream err(dir / "gnuplot.err");
+  const std::string err_text((std::istreambuf_iterator<char>(err)), {});
+  if (rc != 0 || !fs::exists(png_path + ".tmp")) {
+    throw ConfigError("plot: gnuplot failed (exit " + std::to_string(rc) +
+                      "; install gnuplot-nox): " + err_text.substr(0, 400));
+  }
+  fs::rename(png_path + ".tmp", png_path);
+  fs::remove_all(dir);
 }
 
 }  // namespace perch

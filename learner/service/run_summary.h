@@ -22,6 +22,8 @@ struct CurveRow {
   double policy_lag_mean = 0.0;      // updates
   double log_std_mean = 0.0;         // policy exploration (log sigma, mean over actions)
   int actors = 0;
+  int64_t episodes = 0;             // episodes that ended in the batch
+  int64_t episodes_terminated = 0;  // ... by early termination (a fall)
 };
 
 struct RunSummary {
@@ -43,5 +45,10 @@ void WriteCurveCsv(const RunSummary& s, const std::string& path);
 // {run_dir, updates, samples, wall_time_s, samples_per_s, max_actors, checkpoints, last
 // {return_mean, episode_length_mean} averaged over the last 10 updates with episodes}.
 Json ToJson(const RunSummary& s);
+// Learning curves of one or more runs (overlaid, labelled by run dir) as a PNG, drawn by gnuplot
+// (Debian's gnuplot-nox): return, episode length, fall rate (terminated / ended episodes per
+// batch) and samples/s, each against samples (left column) and wall time (right column).
+// ConfigError when gnuplot is missing or fails.
+void PlotRuns(const std::vector<RunSummary>& runs, const std::string& png_path);
 
 }  // namespace perch

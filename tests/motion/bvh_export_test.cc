@@ -39,5 +39,34 @@ TEST(BvhExport, ExportedBvhReproducesTheHumanoidBodies) {
   }
 }
 
+TEST(BvhExport, RoundTripReproducesTheJointAngles) {
+  // Humanoid joint angles -> BVH text -> the project's BVH reader -> joint angles again.
+  const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
+  Rng rng(21);
+  std::vector<MotionPose> frames;
+  for (int i = 0; i < 6; ++i) {
+    MotionPose p;
+    p.root_pos = Eigen::Vector3d(rng.Uniform(-1, 1), rng.Uniform(-1, 1), rng.Uniform(0.5, 1.3));
+    p.root_rot = Eigen::Quaterniond(Eigen::AngleAxisd(rng.Uniform(-3, 3), Eigen::Vector3d::UnitZ()));
+    p.q.resize(21);
+    for (int j = 0; j < 21; ++j) {
+      const Joint& jt = model.joint(j);
+      p.q[j] = rng.Uniform(jt.lower + 0.05 * (jt.upper - jt.lower),
+                           jt.upper - 0.05 * (jt.upper - jt.lower));
+    }
+    frames.push_back(p);
+  }
+  const ReferenceMotion m("x", 1.0 / 60.0, frames, false);
+  const BvhClip clip = ParseBvh(WriteBvh(HumanoidMotionToBvh(model, m, 1.0 / 60.0, 0.0)), "rt.bvh");
+  ASSERT_EQ(clip.num_frames(), 6);
+  EXPECT_NEAR(clip.frame_time, 1.0 / 60.0, 1e-8);  // the control rate
+  for (int f = 0; f < 6; ++f) {
+    const std::vector<double> q = HumanoidJointAnglesFromBvh(model, clip, f);
+    for (int j = 0; j < 21; ++j) {
+      EXPECT_NEAR(q[j], frames[f].q[j], 1e-5) << model.joint(j).name << " frame " << f;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace perch

@@ -13,6 +13,8 @@ mkdir -p test/out
 status=0
 node --test --test-reporter=spec test/reader.test.mjs || status=1
 node --test --test-reporter=spec test/browser.test.mjs || status=1
+# With the real programs (perch eval --record, perch view): PERCH_BIN, default build/app/perch.
+node --test --test-reporter=spec test/perch-view.test.mjs || status=1
 if [ "$status" -ne 0 ]; then
   echo "viewer tests: FAILED" >&2
 else
