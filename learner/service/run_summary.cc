@@ -140,6 +140,7 @@ void PlotRuns(const std::vector<RunSummary>& runs, const std::string& png_path) 
   // One whitespace-separated data file per run: samples (M), hours, return, length, fall rate,
   // samples/s ("NaN" where a batch ended no episode, which gnuplot skips).
   std::vector<std::string> files;
+  bool has[4] = {false, false, false, false};  // return, length, fall rate, samples/s
   for (size_t i = 0; i < runs.size(); ++i) {
     const fs::path f = dir / ("run" + std::to_string(i) + ".dat");
     std::ofstream o(f);
@@ -150,6 +151,9 @@ void PlotRuns(const std::vector<RunSummary>& runs, const std::string& png_path) 
       if (r.episodes > 0) o << static_cast<double>(r.episodes_terminated) / r.episodes << ' ';
       else o << "NaN ";
       o << r.samples_per_s << '\n';
+      has[0] = has[1] = has[0] || r.has_episodes;
+      has[2] = has[2] || r.episodes > 0;
+      has[3] = true;
     }
     files.push_back(f.string());
   }
@@ -164,7 +168,13 @@ void PlotRuns(const std::vector<RunSummary>& runs, const std::string& png_path) 
   for (int k = 0; k < 4; ++k) {
     for (int x = 0; x < 2; ++x) {
       g << "set xlabel '" << (x == 0 ? "samples (M)" : "wall time (h)") << "'\nset ylabel '"
-        << names[k] << "'\nplot ";
+        << names[k] << "'\n";
+      if (!has[k]) {
+        // No run logged this quantity (e.g. metrics from before it was logged): an empty panel.
+        g << "plot [0:1] [0:1] 2 title 'no data'\n";
+        continue;
+      }
+      g << "plot ";
       for (size_t i = 0; i < files.size(); ++i) {
         std::string label = runs[i].run_dir;
         for (char& c : label) {

@@ -2,7 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <filesystem>
+#include <iterator>
+#include <utility>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -88,6 +91,48 @@ TEST(RunSummary, TornLastLineIsIgnoredDamageElsewhereIsNamed) {
     EXPECT_NE(std::string(e.what()).find("'samples'"), std::string::npos) << e.what();
   }
   EXPECT_THROW(SummarizeRun(::testing::TempDir() + "/no_such_run"), ConfigError);
+}
+
+// PNG width and height from the IHDR chunk (bytes 16-23, big-endian).
+std::pair<int, int> PngSize(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string b((std::istreambuf_iterator<char>(in)), {});
+  if (b.size() < 24 || b.compare(1, 3, "PNG") != 0) return {0, 0};
+  auto be = [&](int at) {
+    return (static_cast<uint8_t>(b[at]) << 24) | (static_cast<uint8_t>(b[at + 1]) << 16) |
+           (static_cast<uint8_t>(b[at + 2]) << 8) | static_cast<uint8_t>(b[at + 3]);
+  };
+  return {be(16), be(20)};
+}
+
+TEST(RunSummary, PlotDrawsOneOrSeveralRunsWithGnuplot) {
+  std::string a, b;
+  for (int u = 1; u <= 30; ++u) {
+    a += Row(u, u * 1.0, std::to_string(u * 0.5).c_str()) + "\n";
+    b += Row(u, u * 2.0, std::to_string(30 - u * 0.3).c_str()) + "\n";
+  }
+  const RunSummary ra = SummarizeRun(RunDir("plot_a", a));
+  const RunSummary rb = SummarizeRun(RunDir("plot_b", b));
+  const std::string one = ::testing::TempDir() + "/plot_one.png";
+  const std::string two = ::testing::TempDir() + "/plot_two.png";
+  fs::remove(one);
+  fs::remove(two);
+  PlotRuns({ra}, one);
+  PlotRuns({ra, rb}, two);
+  EXPECT_EQ(PngSize(one), std::make_pair(1400, 1400));
+  EXPECT_EQ(PngSize(two), std::make_pair(1400, 1400));
+  EXPECT_NE(fs::file_size(one), fs::file_size(two));  // the second run's lines and key
+  // Without gnuplot: a clear error naming it, and the old file is kept.
+  const std::string path = std::getenv("PATH");
+  ::setenv("PATH", "/nonexistent", 1);
+  try {
+    PlotRuns({ra}, two);
+    ADD_FAILURE() << "plotted without gnuplot";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("gnuplot"), std::string::npos) << e.what();
+  }
+  ::setenv("PATH", path.c_str(), 1);
+  EXPECT_EQ(PngSize(two), std::make_pair(1400, 1400));
 }
 
 }  // namespace
