@@ -195,6 +195,7 @@ void ActorService::Run() {
       pv->set_version(runner_.version());
       rollouts[i].ToProto(s->mutable_rollout());
       // Episodes ended, in order, at the steps flagged terminated or truncated.
+      const bool has_success = envs_[i]->spec().has_success;
       size_t e = 0;
       const Rollout& r = rollouts[i];
       for (int t = 0; t < r.size() && e < eps.returns.size(); ++t) {
@@ -203,6 +204,10 @@ void ActorService::Run() {
         es->set_episode_return(eps.returns[e]);
         es->set_length(static_cast<uint32_t>(eps.lengths[e]));
         es->set_terminated(r.terminated[t] != 0);
+        if (has_success) {
+          es->set_has_success(true);
+          es->set_success(e < eps.succeeded.size() && eps.succeeded[e] != 0);
+        }
         ++e;
       }
       s->set_bootstrap_value(

@@ -90,6 +90,7 @@ void HierarchicalCollector::CollectMeta(PolicyRunner* meta,
       if (stats != nullptr) {
         stats->returns.push_back(episode_return_);
         stats->lengths.push_back(episode_length_);
+        stats->succeeded.push_back(0);  // the meta task's success is not judged here yet
         (term ? stats->terminated : stats->truncated) += 1;
       }
     }

@@ -26,6 +26,7 @@ struct EnvSpec {
   std::vector<ObsSlice> obs_slices;  // which slices are which
   double control_dt = 1.0 / 60.0;  // seconds per Step()
   int max_episode_steps = 1000;    // truncation limit, in Step() calls
+  bool has_success = false;        // the task has a success test (StepResult::success)
 };
 
 // Result of one Step(). `terminated` (e.g. fell) and `truncated` (time limit) are distinct:
@@ -35,6 +36,7 @@ struct StepResult {
   bool terminated = false;
   bool truncated = false;
   bool invalid = false;  // NaN/Inf or exploding state detected; also sets terminated
+  bool success = false;  // the task's success test passed at this step (once per episode)
 };
 
 class Env {

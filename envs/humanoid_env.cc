@@ -180,6 +180,7 @@ void HumanoidChairEnv::BuildSpec() {
   if (layout == ObsLayout::kProprioGoal) spec_.obs_slices.push_back({"goal", 50, 2});
   spec_.control_dt = config_.physics.physics_dt * config_.physics.substeps;
   spec_.max_episode_steps = task_->max_episode_steps();
+  spec_.has_success = task_->has_success();
 }
 
 void HumanoidChairEnv::Reset(float* obs) {
@@ -281,6 +282,7 @@ StepResult HumanoidChairEnv::Step(const float* action, float* obs) {
   const TaskStep t = task_->OnStep(*this, action);
   r.reward = t.reward;
   r.terminated = t.terminated;
+  r.success = t.success;
   r.truncated = !r.terminated && step_ >= task_->max_episode_steps();
   return r;
 }

@@ -24,6 +24,7 @@ class HumanoidChairEnv;
 struct TaskStep {
   float reward = 0.0f;
   bool terminated = false;  // e.g. fell
+  bool success = false;     // the task's success test passed at this step (once per episode)
 };
 
 class Task {
@@ -31,6 +32,8 @@ class Task {
   virtual ~Task() = default;
   virtual const char* name() const = 0;
   virtual int max_episode_steps() const = 0;
+  // Whether OnStep ever reports success (training metrics count it; docs/subtasks.md).
+  virtual bool has_success() const { return false; }
   // Chooses the episode's initial state (world frame), e.g. a reference frame (reference state
   // initialisation); returning false keeps the env's spawn (config.spawn, config.init).
   virtual bool InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) {

@@ -193,12 +193,14 @@ void RolloutCollector::Collect(PolicyRunner* runner, Rng& rng, int steps, Rollou
       need_reset_ = false;
       episode_return_ = 0.0;
       episode_length_ = 0;
+      episode_success_ = false;
     }
     const PolicyRunner::Output o =
         runner->Act(obs_.data(), rng, deterministic_, norm_obs_.data(), action_.data());
     const StepResult sr = env_->Step(action_.data(), next_obs_.data());
     ++episode_length_;
     episode_return_ += sr.reward;
+    episode_success_ = episode_success_ || sr.success;
     const bool term = sr.terminated || sr.invalid;
     const bool trunc = !term && (sr.truncated || episode_length_ >= spec.max_episode_steps);
     const bool last = t == steps - 1;
@@ -211,6 +213,7 @@ void RolloutCollector::Collect(PolicyRunner* runner, Rng& rng, int steps, Rollou
       if (stats != nullptr) {
         stats->returns.push_back(episode_return_);
         stats->lengths.push_back(episode_length_);
+        stats->succeeded.push_back(episode_success_ ? 1 : 0);
         (term ? stats->terminated : stats->truncated) += 1;
       }
     } else {

@@ -69,6 +69,7 @@ struct EpisodeStats {
   std::vector<int> lengths;
   int terminated = 0;
   int truncated = 0;
+  std::vector<uint8_t> succeeded;  // [episodes] the task's success test passed (has_success)
 };
 
 // Steps one Env with a PolicyRunner, in process: what an actor does, without the sockets.
@@ -89,6 +90,7 @@ class RolloutCollector {
   bool need_reset_ = true;
   double episode_return_ = 0.0;
   int episode_length_ = 0;
+  bool episode_success_ = false;
   std::vector<float> obs_, next_obs_, norm_obs_, action_;
 };
 

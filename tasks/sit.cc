@@ -214,6 +214,8 @@ void SitTask::OnReset(HumanoidChairEnv& env, Rng& rng) {
   m_.prev_distance = env.PelvisSeatDistance();
   terms_ = SitTerms();
   terms_.seat_distance_m = m_.prev_distance;
+  contact_run_ = 0;
+  succeeded_ = false;
   env.SetWalkTarget(env.SeatTargetWorld().head<2>());
 }
 
@@ -245,6 +247,12 @@ TaskStep SitTask::OnStep(const HumanoidChairEnv& env, const float* action) {
   TaskStep r;
   r.reward = static_cast<float>(t.total);
   r.terminated = env.humanoid_state().root_pos.z() < c_.min_root_z;
+  contact_run_ = env.PelvisSeatContact() ? contact_run_ + 1 : 0;
+  const int need = static_cast<int>(std::ceil(c_.success_contact_s / dt_ - 1e-9));
+  if (!succeeded_ && contact_run_ >= need) {
+    succeeded_ = true;
+    r.success = true;
+  }
   return r;
 }
 

@@ -85,6 +85,7 @@ class SitTask : public ClipTask {
   SitTask(const SitTaskConfig& config, double control_dt);
   const char* name() const override { return "sit"; }
   int max_episode_steps() const override { return c_.max_episode_steps; }
+  bool has_success() const override { return true; }
   bool InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) override;
   void OnReset(HumanoidChairEnv& env, Rng& rng) override;
   TaskStep OnStep(const HumanoidChairEnv& env, const float* action) override;
@@ -106,6 +107,10 @@ class SitTask : public ClipTask {
  private:
   SitTaskConfig c_;
   SitTerms terms_;
+  // Success (3 s of continuous seat contact) for the training metrics, as perch eval judges it.
+  // Not in the saved memory: an episode restored from a bank counts contact from the restore.
+  int contact_run_ = 0;
+  bool succeeded_ = false;
   Eigen::Vector3d pelvis_end_clip_ = Eigen::Vector3d::Zero();  // clip frame [m]
   double root_top_z_ = 0.0, root_bottom_z_ = 0.0;              // clip root heights [m]
   bool pelvis_end_known_ = false;

@@ -206,6 +206,9 @@ TaskStep TurnTask::OnStep(const HumanoidChairEnv& env, const float* action) {
   r.reward = static_cast<float>(t.total);
   r.terminated = env.humanoid_state().root_pos.z() < c_.min_root_z ||
                  std::abs(t.yaw_error_rad) > c_.max_yaw_error_deg * M_PI / 180.0;
+  // Success (docs/subtasks.md): judged once, at SuccessStep, as perch eval does.
+  r.success = k == SuccessStep() && !r.terminated &&
+              std::abs(t.yaw_error_rad) <= c_.success_yaw_tol_deg * M_PI / 180.0;
   return r;
 }
 

@@ -73,6 +73,7 @@ class TurnTask : public ClipTask {
   TurnTask(const std::string& name, const TurnTaskConfig& config, double control_dt);
   const char* name() const override { return name_.c_str(); }
   int max_episode_steps() const override { return c_.max_episode_steps; }
+  bool has_success() const override { return true; }
   bool InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) override;
   void OnReset(HumanoidChairEnv& env, Rng& rng) override;
   void BeforeObservation(HumanoidChairEnv& env, Rng& rng) override;

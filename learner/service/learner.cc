@@ -340,6 +340,8 @@ bool LearnerService::HandleSegment(const proto::Segment& seg) {
     batch_returns_.push_back(e.episode_return());
     batch_lengths_.push_back(e.length());
     batch_terminated_ += e.terminated();
+    batch_judged_ += e.has_success();
+    batch_succeeded_ += e.has_success() && e.success();
   }
   counters_.set_episodes(counters_.episodes() + seg.episodes_size());
   counters_.set_segments(counters_.segments() + 1);
@@ -376,6 +378,8 @@ void LearnerService::Train() {
     batch_returns_.clear();
     batch_lengths_.clear();
     batch_terminated_ = 0;
+    batch_judged_ = 0;
+    batch_succeeded_ = 0;
     return;
   }
   counters_.set_updates(counters_.updates() + 1);
@@ -395,6 +399,8 @@ void LearnerService::Train() {
   batch_returns_.clear();
   batch_lengths_.clear();
   batch_terminated_ = 0;
+  batch_judged_ = 0;
+  batch_succeeded_ = 0;
   if (counters_.updates() % setup_.cluster.checkpoint_every == 0) SaveCheckpoint();
 }
 
@@ -408,6 +414,9 @@ void LearnerService::WriteMetrics(const UpdateStats& u, double update_s, uint64_
       {"policy_lag_mean", last_lag_mean_},
       {"episodes", batch_returns_.size()},
       {"episodes_terminated", batch_terminated_},  // falls; the others hit the time limit
+      // Episodes judged by the task's success test (turn, sit) and how many passed.
+      {"episodes_judged", batch_judged_},
+      {"episodes_succeeded", batch_succeeded_},
       {"return_mean", batch_returns_.empty() ? Json(nullptr) : Json(Mean(batch_returns_))},
       {"episode_length_mean", batch_lengths_.empty() ? Json(nullptr) : Json(Mean(batch_lengths_))},
       {"dropped_stale", counters_.dropped_stale()},

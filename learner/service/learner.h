@@ -110,6 +110,8 @@ class LearnerService {
   std::vector<double> batch_returns_;
   std::vector<double> batch_lengths_;
   int batch_terminated_ = 0;  // episodes of the batch that ended by termination (fell)
+  int batch_judged_ = 0;      // ... that the task's success test judged (EpisodeStats.has_success)
+  int batch_succeeded_ = 0;   // ... and that passed it
   uint64_t wire_samples_ = 0;  // samples in those messages, since this process started
   uint64_t wire_bytes_ = 0;    // bytes of accepted segment messages (wire_bytes_per_sample)
   std::map<uint64_t, double> actor_last_seen_;  // actor_instance -> monotonic seconds

@@ -60,6 +60,12 @@ RunSummary SummarizeRun(const std::string& run_dir) {
     if (row.contains("episodes_terminated") && row["episodes_terminated"].is_number()) {
       r.episodes_terminated = row["episodes_terminated"].get<int64_t>();
     }
+    if (row.contains("episodes_judged") && row["episodes_judged"].is_number()) {
+      r.episodes_judged = row["episodes_judged"].get<int64_t>();
+    }
+    if (row.contains("episodes_succeeded") && row["episodes_succeeded"].is_number()) {
+      r.episodes_succeeded = row["episodes_succeeded"].get<int64_t>();
+    }
     r.has_episodes = row.contains("return_mean") && row["return_mean"].is_number();
     if (r.has_episodes) {
       r.return_mean = row["return_mean"].get<double>();
@@ -140,7 +146,7 @@ void PlotRuns(const std::vector<RunSummary>& runs, const std::string& png_path) 
   // One whitespace-separated data file per run: samples (M), hours, return, length, fall rate,
   // samples/s ("NaN" where a batch ended no episode, which gnuplot skips).
   std::vector<std::string> files;
-  bool has[4] = {false, false, false, false};  // return, length, fall rate, samples/s
+  bool has[5] = {false, false, false, false, false};  // return, length, falls, success, samples/s
   for (size_t i = 0; i < runs.size(); ++i) {
     const fs::path f = dir / ("run" + std::to_string(i) + ".dat");
     std::ofstream o(f);
@@ -150,22 +156,29 @@ void PlotRuns(const std::vector<RunSummary>& runs, const std::string& png_path) 
       else o << "NaN NaN ";
       if (r.episodes > 0) o << static_cast<double>(r.episodes_terminated) / r.episodes << ' ';
       else o << "NaN ";
+      if (r.episodes_judged > 0) {
+        o << static_cast<double>(r.episodes_succeeded) / r.episodes_judged << ' ';
+      } else {
+        o << "NaN ";
+      }
       o << r.samples_per_s << '\n';
       has[0] = has[1] = has[0] || r.has_episodes;
       has[2] = has[2] || r.episodes > 0;
-      has[3] = true;
+      has[3] = has[3] || r.episodes_judged > 0;
+      has[4] = true;
     }
     files.push_back(f.string());
   }
   std::ostringstream g;
-  g << "set terminal pngcairo size 1400,1400 font ',10'\n"
+  g << "set terminal pngcairo size 1400,1700 font ',10'\n"
     << "set output '" << png_path << ".tmp'\n"
     << "set datafile missing 'NaN'\nset grid\nset key bottom right\n"
-    << "set multiplot layout 4,2 title 'Perch learning curves'\n";
-  const char* names[4] = {"return (episode mean)", "episode length (control steps)",
-                          "fall rate (terminated / ended)", "samples/s"};
-  const int cols[4] = {3, 4, 5, 6};
-  for (int k = 0; k < 4; ++k) {
+    << "set multiplot layout 5,2 title 'Perch learning curves'\n";
+  const char* names[5] = {"return (episode mean)", "episode length (control steps)",
+                          "fall rate (terminated / ended)",
+                          "success rate (training episodes)", "samples/s"};
+  const int cols[5] = {3, 4, 5, 6, 7};
+  for (int k = 0; k < 5; ++k) {
     for (int x = 0; x < 2; ++x) {
       g << "set xlabel '" << (x == 0 ? "samples (M)" : "wall time (h)") << "'\nset ylabel '"
         << names[k] << "'\n";

@@ -24,6 +24,8 @@ struct CurveRow {
   int actors = 0;
   int64_t episodes = 0;             // episodes that ended in the batch
   int64_t episodes_terminated = 0;  // ... by early termination (a fall)
+  int64_t episodes_judged = 0;      // ... judged by the task's success test (turn, sit)
+  int64_t episodes_succeeded = 0;   // ... that passed it
 };
 
 struct RunSummary {
@@ -47,7 +49,7 @@ void WriteCurveCsv(const RunSummary& s, const std::string& path);
 Json ToJson(const RunSummary& s);
 // Learning curves of one or more runs (overlaid, labelled by run dir) as a PNG, drawn by gnuplot
 // (Debian's gnuplot-nox): return, episode length, fall rate (terminated / ended episodes per
-// batch) and samples/s, each against samples (left column) and wall time (right column).
+// batch), success rate (passed / judged, tasks with a success test) and samples/s, each against samples (left column) and wall time (right column).
 // ConfigError when gnuplot is missing or fails.
 void PlotRuns(const std::vector<RunSummary>& runs, const std::string& png_path);
 

@@ -130,6 +130,30 @@ TEST(SitTask, HoldContactBonusIsPaidOnlyForPelvisContactAfterTheClip) {
   EXPECT_EQ(SitTaskConfig().hold_contact_weight, 0.0);  // off in the paper's task
 }
 
+TEST(SitTask, StepsReportSuccessAfterThreeSecondsOfSeatContact) {
+  auto env = MakeSitEnv(Json{{"reference_state_init", false}, {"max_episode_steps", 400}});
+  EXPECT_TRUE(env->spec().has_success);
+  std::vector<float> obs(57), zero(21, 0.0f);
+  env->Seed(4);
+  env->Reset(obs.data());
+  env->ResetToState(SeatedPose(env->model(), *env->chair(), env->config().chair_placement, 0.005),
+                    obs.data());
+  const int need = static_cast<int>(std::ceil(3.0 * 60.0 - 1e-9));
+  int run = 0, want = -1, got = -1, count = 0;
+  for (int k = 1; k <= 350; ++k) {
+    const StepResult r = env->Step(zero.data(), obs.data());
+    run = env->PelvisSeatContact() ? run + 1 : 0;
+    if (want < 0 && run >= need) want = k;
+    if (r.success) {
+      ++count;
+      got = k;
+    }
+  }
+  ASSERT_GT(want, 0) << "the seated body stays on the seat for 3 s";
+  EXPECT_EQ(got, want);
+  EXPECT_EQ(count, 1);
+}
+
 TEST(SitTask, HoldSeatTermRewardsThePelvisNearTheSeatTargetAfterTheClip) {
   const double w = 0.2, alpha = 200.0;
   auto plain = MakeSitEnv(Json{{"reference_state_init", false}});

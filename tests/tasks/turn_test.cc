@@ -72,6 +72,36 @@ TEST(TurnTask, HeadingGoalIsTheReferenceHeadingRelativeToTheHumanoid) {
   }
 }
 
+TEST(TurnTask, StepsReportSuccessOnceAtTheJudgingStep) {
+  // With every termination and the yaw tolerance opened up, success is reported exactly at
+  // SuccessStep (clip end + 0.5 s), once; with a tolerance nothing meets, never.
+  for (double tol : {180.0, 1e-9}) {
+    auto env = MakeTurnEnv("turn_left", Json{{"max_yaw_error_deg", 180.0},
+                                             {"min_root_z", 0.0},
+                                             {"success_yaw_tol_deg", tol},
+                                             {"max_episode_steps", 400}});
+    EXPECT_TRUE(env->spec().has_success);
+    std::vector<float> obs(50), zero(21, 0.0f);
+    env->Seed(2);
+    env->Reset(obs.data());
+    int first = -1, count = 0;
+    for (int k = 1; k <= 300; ++k) {
+      const StepResult r = env->Step(zero.data(), obs.data());
+      ASSERT_FALSE(r.terminated) << k;
+      if (r.success) {
+        ++count;
+        if (first < 0) first = k;
+      }
+    }
+    if (tol > 1.0) {
+      EXPECT_EQ(count, 1);
+      EXPECT_EQ(first, TaskOf(*env).SuccessStep());
+    } else {
+      EXPECT_EQ(count, 0);
+    }
+  }
+}
+
 TEST(TurnTask, StartsAtFrameZeroOverTheOriginWithARandomYaw) {
   auto env = MakeTurnEnv("turn_left");
   std::vector<float> obs(env->spec().obs_dim);

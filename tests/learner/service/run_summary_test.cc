@@ -119,8 +119,8 @@ TEST(RunSummary, PlotDrawsOneOrSeveralRunsWithGnuplot) {
   fs::remove(two);
   PlotRuns({ra}, one);
   PlotRuns({ra, rb}, two);
-  EXPECT_EQ(PngSize(one), std::make_pair(1400, 1400));
-  EXPECT_EQ(PngSize(two), std::make_pair(1400, 1400));
+  EXPECT_EQ(PngSize(one), std::make_pair(1400, 1700));
+  EXPECT_EQ(PngSize(two), std::make_pair(1400, 1700));
   EXPECT_NE(fs::file_size(one), fs::file_size(two));  // the second run's lines and key
   // Without gnuplot: a clear error naming it, and the old file is kept.
   const std::string path = std::getenv("PATH");
@@ -132,7 +132,7 @@ TEST(RunSummary, PlotDrawsOneOrSeveralRunsWithGnuplot) {
     EXPECT_NE(std::string(e.what()).find("gnuplot"), std::string::npos) << e.what();
   }
   ::setenv("PATH", path.c_str(), 1);
-  EXPECT_EQ(PngSize(two), std::make_pair(1400, 1400));
+  EXPECT_EQ(PngSize(two), std::make_pair(1400, 1700));
 }
 
 }  // namespace
