@@ -1,5 +1,7 @@
 #include "common/file_util.h"
 
+#include "common/json_util.h"
+
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -66,6 +68,54 @@ void WriteFileAtomic(const std::string& path, const std::string& bytes) {
     ::fsync(dfd);
     ::close(dfd);
   }
+}
+
+namespace {
+
+void PutLe(std::string* s, uint64_t v, int bytes) {
+  for (int i = 0; i < bytes; ++i) s->push_back(static_cast<char>((v >> (8 * i)) & 0xff));
+}
+uint64_t GetLe(const std::string& s, size_t at, int bytes) {
+  uint64_t v = 0;
+  for (int i = 0; i < bytes; ++i) {
+    v |= static_cast<uint64_t>(static_cast<uint8_t>(s[at + i])) << (8 * i);
+  }
+  return v;
+}
+
+}  // namespace
+
+std::string FramePayload(const char (&magic)[8], uint32_t format, const std::string& payload) {
+  std::string out(magic, 8);
+  PutLe(&out, format, 4);
+  PutLe(&out, payload.size(), 8);
+  PutLe(&out, Crc32(payload.data(), payload.size()), 4);
+  return out + payload;
+}
+
+std::string UnframePayload(const std::string& bytes, const std::string& path,
+                           const char (&magic)[8], uint32_t format, const std::string& noun,
+                           const std::string& format_hint) {
+  if (bytes.size() < kFrameHeaderBytes || std::memcmp(bytes.data(), magic, 8) != 0) {
+    throw ConfigError(path + ": not a " + noun + " (no " + std::string(magic, 8) + " header; " +
+                      std::to_string(bytes.size()) + " bytes)");
+  }
+  const uint32_t got = static_cast<uint32_t>(GetLe(bytes, 8, 4));
+  if (got != format) {
+    throw ConfigError(path + ": " + noun + " format " + std::to_string(got) +
+                      ", this build reads " + std::to_string(format) + format_hint);
+  }
+  const uint64_t len = GetLe(bytes, 12, 8);
+  if (bytes.size() - kFrameHeaderBytes != len) {
+    throw ConfigError(path + ": " + noun + " payload is " +
+                      std::to_string(bytes.size() - kFrameHeaderBytes) + " bytes, its header says " +
+                      std::to_string(len) + " (truncated or corrupt)");
+  }
+  std::string payload = bytes.substr(kFrameHeaderBytes);
+  if (Crc32(payload.data(), payload.size()) != static_cast<uint32_t>(GetLe(bytes, 20, 4))) {
+    throw ConfigError(path + ": " + noun + " CRC-32 mismatch (corrupt)");
+  }
+  return payload;
 }
 
 }  // namespace perch

@@ -16,4 +16,15 @@ uint32_t Crc32(const void* data, size_t size);
 // untouched then.
 void WriteFileAtomic(const std::string& path, const std::string& bytes);
 
+// The framed layout of state banks and recordings: 8-byte magic, uint32 format, uint64 payload
+// length, uint32 CRC-32 of the payload (little-endian), payload.
+constexpr size_t kFrameHeaderBytes = 8 + 4 + 8 + 4;
+std::string FramePayload(const char (&magic)[8], uint32_t format, const std::string& payload);
+// The payload of a framed file's `bytes`; ConfigError "PATH: ..." naming the kind (`noun`, e.g.
+// "state bank") and the reason: no magic, another format (+ `format_hint`), a length that differs
+// from the header's (truncated or corrupt), a CRC mismatch.
+std::string UnframePayload(const std::string& bytes, const std::string& path,
+                           const char (&magic)[8], uint32_t format, const std::string& noun,
+                           const std::string& format_hint = "");
+
 }  // namespace perch

@@ -12,17 +12,6 @@ namespace perch {
 namespace {
 
 constexpr char kMagic[8] = {'P', 'E', 'R', 'C', 'H', 'R', 'E', 'C'};
-constexpr size_t kHeader = 24;  // magic 8, format 4, length 8, CRC 4
-
-void PutLe(std::string* out, uint64_t v, int bytes) {
-  for (int i = 0; i < bytes; ++i) out->push_back(static_cast<char>((v >> (8 * i)) & 0xff));
-}
-uint64_t GetLe(const std::string& s, size_t at, int bytes) {
-  uint64_t v = 0;
-  for (int i = 0; i < bytes; ++i) v |= static_cast<uint64_t>(static_cast<uint8_t>(s[at + i])) << (8 * i);
-  return v;
-}
-
 template <typename Field>
 void Put3(Field* f, const Eigen::Vector3d& v) {
   for (int i = 0; i < 3; ++i) f->Add(static_cast<float>(v[i]));
@@ -143,12 +132,7 @@ void WriteRecording(const std::string& path, const proto::Recording& rec, bool o
   if (!overwrite && std::filesystem::exists(path)) {
     throw ConfigError(path + ": exists; not overwritten (pass --force to replace it)");
   }
-  const std::string payload = rec.SerializeAsString();
-  std::string out(kMagic, 8);
-  PutLe(&out, kRecordingFormat, 4);
-  PutLe(&out, payload.size(), 8);
-  PutLe(&out, Crc32(payload.data(), payload.size()), 4);
-  out += payload;
+  const std::string out = FramePayload(kMagic, kRecordingFormat, rec.SerializeAsString());
   WriteFileAtomic(path, out);
 }
 
@@ -156,24 +140,7 @@ proto::Recording ReadRecording(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw ConfigError(path + ": cannot open recording");
   const std::string bytes((std::istreambuf_iterator<char>(in)), {});
-  if (bytes.size() < kHeader || std::memcmp(bytes.data(), kMagic, 8) != 0) {
-    throw ConfigError(path + ": not a recording (no PERCHREC header; " +
-                      std::to_string(bytes.size()) + " bytes)");
-  }
-  const uint32_t format = static_cast<uint32_t>(GetLe(bytes, 8, 4));
-  if (format != kRecordingFormat) {
-    throw ConfigError(path + ": recording format " + std::to_string(format) +
-                      ", this build reads " + std::to_string(kRecordingFormat));
-  }
-  const uint64_t len = GetLe(bytes, 12, 8);
-  if (bytes.size() - kHeader != len) {
-    throw ConfigError(path + ": recording payload is " + std::to_string(bytes.size() - kHeader) +
-                      " bytes, its header says " + std::to_string(len) + " (truncated or corrupt)");
-  }
-  const std::string payload = bytes.substr(kHeader);
-  if (Crc32(payload.data(), payload.size()) != static_cast<uint32_t>(GetLe(bytes, 20, 4))) {
-    throw ConfigError(path + ": recording CRC-32 mismatch (corrupt)");
-  }
+  const std::string payload = UnframePayload(bytes, path, kMagic, kRecordingFormat, "recording");
   proto::Recording rec;
   if (!rec.ParseFromString(payload)) throw ConfigError(path + ": recording payload does not parse");
   if (rec.format_version() != kRecordingFormat) {

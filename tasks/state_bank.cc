@@ -21,18 +21,6 @@ namespace perch {
 namespace {
 
 constexpr char kMagic[8] = {'P', 'E', 'R', 'C', 'H', 'B', 'N', 'K'};
-constexpr size_t kHeader = 8 + 4 + 8 + 4;
-
-void PutLe(std::string* s, uint64_t v, int bytes) {
-  for (int i = 0; i < bytes; ++i) s->push_back(static_cast<char>((v >> (8 * i)) & 0xff));
-}
-uint64_t GetLe(const std::string& s, size_t at, int bytes) {
-  uint64_t v = 0;
-  for (int i = 0; i < bytes; ++i)
-    v |= static_cast<uint64_t>(static_cast<uint8_t>(s[at + i])) << (8 * i);
-  return v;
-}
-
 proto::Vec3 V(const Eigen::Vector3d& v) {
   proto::Vec3 p;
   p.set_x(v.x());
@@ -83,36 +71,13 @@ void WriteStateBank(const std::string& path, const proto::StateBank& bank, bool 
   if (!overwrite && std::filesystem::exists(path)) {
     throw ConfigError(path + ": exists; not overwritten (a bank is an experiment's input)");
   }
-  const std::string payload = bank.SerializeAsString();
-  std::string out(kMagic, 8);
-  PutLe(&out, kStateBankFormat, 4);
-  PutLe(&out, payload.size(), 8);
-  PutLe(&out, Crc32(payload.data(), payload.size()), 4);
-  out += payload;
+  const std::string out = FramePayload(kMagic, kStateBankFormat, bank.SerializeAsString());
   WriteFileAtomic(path, out);
 }
 
 proto::StateBank ReadStateBank(const std::string& path, const HumanoidModel* model) {
-  const std::string bytes = ReadAll(path);
-  if (bytes.size() < kHeader || std::memcmp(bytes.data(), kMagic, 8) != 0) {
-    throw ConfigError(path + ": not a state bank (no PERCHBNK header; " +
-                      std::to_string(bytes.size()) + " bytes)");
-  }
-  const uint32_t format = static_cast<uint32_t>(GetLe(bytes, 8, 4));
-  if (format != kStateBankFormat) {
-    throw ConfigError(path + ": state bank format " + std::to_string(format) +
-                      ", this build reads " + std::to_string(kStateBankFormat) +
-                      " (resample it with this build)");
-  }
-  const uint64_t len = GetLe(bytes, 12, 8);
-  if (bytes.size() - kHeader != len) {
-    throw ConfigError(path + ": state bank payload is " + std::to_string(bytes.size() - kHeader) +
-                      " bytes, its header says " + std::to_string(len) + " (truncated or corrupt)");
-  }
-  const std::string payload = bytes.substr(kHeader);
-  if (Crc32(payload.data(), payload.size()) != static_cast<uint32_t>(GetLe(bytes, 20, 4))) {
-    throw ConfigError(path + ": state bank CRC-32 mismatch (corrupt)");
-  }
+  const std::string payload = UnframePayload(ReadAll(path), path, kMagic, kStateBankFormat,
+                                             "state bank", " (resample it with this build)");
   proto::StateBank bank;
   if (!bank.ParseFromString(payload))
     throw ConfigError(path + ": state bank payload does not parse");
