@@ -9,17 +9,16 @@ COPY . .
 # 2013; --build-arg PERCH_MARCH=x86-64-v2 for older nodes.
 ARG PERCH_MARCH=x86-64-v3
 RUN cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DPERCH_MARCH="$PERCH_MARCH" \
-    && cmake --build build -j"$(nproc)" --target perch
+    && cmake --build build -j"$(nproc)" --target perch \
+    && cmake --install build --prefix /opt/perch-install
 
 FROM debian:12
 RUN apt-get update -qq && apt-get install -y -qq --no-install-recommends \
       libbullet3.24 libzmq5 libprotobuf32 libspdlog1.10 libfmt9 libpng16-16 libssl3 \
     && rm -rf /var/lib/apt/lists/*
-COPY --from=build /src/build/app/perch /usr/local/bin/perch
-COPY --from=build /src/data /opt/perch/data
-COPY --from=build /src/configs /opt/perch/configs
-WORKDIR /opt/perch
-# Data files (humanoid, chairs, motions) are found here when not running from a source tree.
-ENV PERCH_DATA_DIR=/opt/perch/data
+# The install tree: /usr/local/bin/perch finds its data in /usr/local/share/perch by itself
+# (common/paths.h), the same layout `cmake --install` and the .deb give.
+COPY --from=build /opt/perch-install /usr/local
+WORKDIR /usr/local/share/perch
 ENTRYPOINT []
 CMD ["perch", "--help"]

@@ -1,5 +1,7 @@
 #include "actor/experiment.h"
 
+#include "common/config_file.h"
+
 #ifdef PERCH_HAVE_ENVS
 #include "tasks/task_env.h"
 #endif
@@ -50,11 +52,17 @@ ExperimentConfig ExperimentConfigFromJson(const Json& j, const std::string& ctx)
   return c;
 }
 
-ExperimentConfig LoadExperimentConfig(const std::string& path) {
-  ExperimentConfig c = ExperimentConfigFromJson(LoadJsonFile(path), path);
+ExperimentConfig LoadExperimentConfig(const std::string& path, const std::vector<std::string>& sets) {
+  // Messages name the file; a field that came from --set is named the same way.
+  const std::string& ctx = path;
+  ExperimentConfig c = ExperimentConfigFromJson(LoadComposedConfig(path, sets), ctx);
   // Building one env validates the env section; resolving the policy checks the dims.
   std::unique_ptr<Env> env = MakeExperimentEnv(c);
   ResolvePolicyConfig(c, env->spec());
+  if (c.cluster.target_success > 0 && !env->spec().has_success) {
+    throw ConfigError(ctx + ".cluster.target_success: task \"" + c.cluster.task +
+                      "\" has no success test (use cluster.max_samples)");
+  }
   return c;
 }
 

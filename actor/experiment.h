@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "actor/mock_env.h"
 #include "common/env.h"
@@ -31,8 +32,11 @@ struct ExperimentConfig {
 };
 
 // Strict: unknown field or wrong type -> ConfigError naming the file and field. Also builds one
-// env to check the env section and the policy dims.
-ExperimentConfig LoadExperimentConfig(const std::string& path);
+// env to check the env section and the policy dims. The file may name a `base` config, and each
+// `sets` entry ("ppo.learning_rate=3e-5", the --set flag) overrides one field
+// (common/config_file.h).
+ExperimentConfig LoadExperimentConfig(const std::string& path,
+                                      const std::vector<std::string>& sets = {});
 ExperimentConfig ExperimentConfigFromJson(const Json& j, const std::string& ctx);
 // Resolved config (all defaults filled in), saved into run dirs and checkpoints.
 Json ToJson(const ExperimentConfig& c);

@@ -10,6 +10,7 @@ LearnerSetup MakeLearnerSetup(const ExperimentConfig& cfg) {
   s.ppo = cfg.ppo;
   s.cluster = cfg.cluster;
   s.resolved_config = ToJson(cfg);
+  s.control_dt = env->spec().control_dt;
   s.compat_key = CompatKey(cfg, s.policy);
   return s;
 }

@@ -12,6 +12,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <map>
@@ -26,6 +27,7 @@
 #include "actor/process.h"
 #include "actor/role_setup.h"
 #include "app/commands.h"
+#include "common/config_file.h"
 #include "learner/policy.h"
 #include "learner/rollout.h"
 #include "learner/service/checkpoint.h"
@@ -65,8 +67,20 @@ uint32_t HostnameHash() {
 }
 
 // ---- perch learner ----
+// --max-samples / --target-success are shorthands for --set cluster.max_samples=N and
+// --set cluster.target_success=R.
+std::vector<std::string> SetsWithShorthands(std::vector<std::string> sets, int64_t max_samples,
+                                            double target_success) {
+  if (max_samples > 0) sets.push_back("cluster.max_samples=" + std::to_string(max_samples));
+  if (target_success > 0) sets.push_back("cluster.target_success=" + fmt::format("{}", target_success));
+  return sets;
+}
+
 struct LearnerFlags {
   std::string config;
+  std::vector<std::string> sets;
+  int64_t max_samples = 0;
+  double target_success = 0.0;
   std::string run_dir;
   bool resume = false;
   std::string rollout_bind = "tcp://*:5555";
@@ -82,7 +96,10 @@ int RunLearner(const LearnerFlags& f) {
   if (f.metrics_port != 0) CheckPort(f.metrics_port, "--metrics-port");
   if (f.max_updates < 0) throw ConfigError("--max-updates: must be >= 0");
   if (f.run_dir.empty()) throw ConfigError("--run-dir: required");
-  const ExperimentConfig cfg = LoadExperimentConfig(f.config);
+  if (f.max_samples < 0) throw ConfigError("--max-samples: must be >= 0");
+  if (!(f.target_success >= 0 && f.target_success <= 1)) throw ConfigError("--target-success: must be in [0, 1]");
+  const ExperimentConfig cfg =
+      LoadExperimentConfig(f.config, SetsWithShorthands(f.sets, f.max_samples, f.target_success));
   const LearnerSetup setup = MakeLearnerSetup(cfg);
   if (f.check_config) {
     std::cerr << "perch learner: config " << f.config << " and flags OK\n";
@@ -111,6 +128,7 @@ int RunLearner(const LearnerFlags& f) {
 // ---- perch actor ----
 struct ActorFlags {
   std::string config;
+  std::vector<std::string> sets;
   std::string learner_host;
   int rollout_port = 5555;
   int weights_port = 5556;
@@ -140,7 +158,7 @@ int RunActor(const ActorFlags& f) {
   if (f.actor_id < -1 || f.actor_id > 0x7fffffff) throw ConfigError("--actor-id: out of range");
   if (f.envs < 0) throw ConfigError("--envs: must be >= 1");
   if (f.max_segments < 0) throw ConfigError("--max-segments: must be >= 0");
-  const ExperimentConfig cfg = LoadExperimentConfig(f.config);
+  const ExperimentConfig cfg = LoadExperimentConfig(f.config, f.sets);
   const ActorSetup setup = MakeActorSetup(cfg);
   o.actor_id = f.actor_id >= 0 ? static_cast<uint32_t>(f.actor_id) : HostnameHash();
   o.num_envs = f.envs > 0 ? f.envs : cfg.cluster.envs_per_actor;
@@ -161,6 +179,9 @@ int RunActor(const ActorFlags& f) {
 // ---- perch train ----
 struct TrainFlags {
   std::string config;
+  std::vector<std::string> sets;
+  int64_t max_samples = 0;
+  double target_success = 0.0;
   int actors = 2;
   int envs = 0;
   std::string run_dir;
@@ -180,6 +201,10 @@ std::vector<std::string> LearnerArgv(const TrainFlags& f, bool resume) {
       "--weights-bind", "tcp://127.0.0.1:" + std::to_string(f.weights_port),
       "--metrics-port", std::to_string(f.metrics_port)};
   if (resume) a.push_back("--resume");
+  for (const std::string& s : SetsWithShorthands(f.sets, f.max_samples, f.target_success)) {
+    a.push_back("--set");
+    a.push_back(s);
+  }
   if (f.max_updates > 0) {
     a.push_back("--max-updates");
     a.push_back(std::to_string(f.max_updates));
@@ -194,6 +219,11 @@ std::vector<std::string> ActorArgv(const TrainFlags& f, int id) {
                                 "--rollout-port", std::to_string(f.rollout_port),
                                 "--weights-port", std::to_string(f.weights_port),
                                 "--actor-id",     std::to_string(id)};
+  // The actors build the same env as the learner: the same overrides.
+  for (const std::string& s : f.sets) {
+    a.push_back("--set");
+    a.push_back(s);
+  }
   if (f.envs > 0) {
     a.push_back("--envs");
     a.push_back(std::to_string(f.envs));
@@ -206,7 +236,10 @@ int RunTrain(TrainFlags f) {
   CheckPort(f.rollout_port, "--rollout-port");
   CheckPort(f.weights_port, "--weights-port");
   CheckPort(f.metrics_port, "--metrics-port");
-  const ExperimentConfig cfg = LoadExperimentConfig(f.config);
+  if (f.max_samples < 0) throw ConfigError("--max-samples: must be >= 0");
+  if (!(f.target_success >= 0 && f.target_success <= 1)) throw ConfigError("--target-success: must be in [0, 1]");
+  const ExperimentConfig cfg =
+      LoadExperimentConfig(f.config, SetsWithShorthands(f.sets, f.max_samples, f.target_success));
   if (f.run_dir.empty()) {
     std::string base = f.config.substr(f.config.rfind('/') + 1);
     base = base.substr(0, base.rfind('.'));
@@ -220,9 +253,10 @@ int RunTrain(TrainFlags f) {
   }
   LogToStderr("train");
   InstallStopHandlers();
-  ::mkdir(f.run_dir.c_str(), 0755);
   const std::string logs = f.run_dir + "/logs";
-  ::mkdir(logs.c_str(), 0755);
+  std::error_code ec;
+  std::filesystem::create_directories(logs, ec);  // runs/ may not exist yet on a fresh clone
+  if (ec) throw ConfigError("--run-dir " + f.run_dir + ": cannot create it: " + ec.message());
   spdlog::info("train: learner + {} actors on loopback, run dir {}, logs in {}", f.actors,
                f.run_dir, logs);
   pid_t learner = Spawn(LearnerArgv(f, f.resume), "");
@@ -449,7 +483,7 @@ Json Spread(const std::vector<double>& v) {
 
 // ---- perch bench cluster ----
 struct BenchFlags {
-  std::string config = std::string(PERCH_SOURCE_DIR) + "/configs/default.json";
+  std::string config = "configs/default.json";
   int actors = 0;  // 0: one per core
   int envs = 0;
   double env_seconds = 5.0;
@@ -537,7 +571,7 @@ int RunBenchCluster(const BenchFlags& f) {
   // that learns changes what the humanoid does, and with it the cost of a step, within seconds.
   std::string cluster_config = f.config;
   if (!f.train_policy) {
-    Json j = LoadJsonFile(f.config);
+    Json j = LoadComposedConfig(f.config);
     j["ppo"]["learning_rate"] = 1e-12;
     cluster_config = MakeTempDir() + "/frozen_policy.json";
     SaveJsonFileAtomic(cluster_config, j);
@@ -620,7 +654,7 @@ Json LegacyPhysics() {
 }
 
 struct BenchTrainFlags {
-  std::string config = std::string(PERCH_SOURCE_DIR) + "/configs/default.json";
+  std::string config = "configs/default.json";
   int actors = 0;  // 0: one per core
   int envs = 0;
   int64_t updates = 20;
@@ -668,7 +702,7 @@ int RunBenchTrain(const BenchTrainFlags& f) {
   InstallStopHandlers();
   if (f.updates < 3) throw ConfigError("--updates: must be >= 3");
   if (f.rounds < 1) throw ConfigError("--rounds: must be >= 1");
-  const Json base = LoadJsonFile(f.config);
+  const Json base = LoadComposedConfig(f.config);
   const ExperimentConfig cfg = ExperimentConfigFromJson(base, f.config);
   const int cores = std::max(1u, std::thread::hardware_concurrency());
   const int actors = f.actors > 0 ? f.actors : cores;
@@ -787,6 +821,12 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   l->add_option("--weights-bind", lf->weights_bind, "ZeroMQ endpoint for weights (XPUB)");
   l->add_option("--metrics-port", lf->metrics_port, "Prometheus /metrics port (0: any free)");
   l->add_option("--max-updates", lf->max_updates, "stop after this many updates (0: never)");
+  l->add_option("--set", lf->sets, "override a config field: section.field=VALUE (repeatable)");
+  l->add_option("--max-samples", lf->max_samples,
+                "end the run after this many samples (cluster.max_samples; 0: the config's)");
+  l->add_option("--target-success", lf->target_success,
+                "end the run at this success rate over cluster.target_window judged episodes "
+                "(cluster.target_success; 0: the config's)");
   l->add_flag("--check-config", lf->check_config, "validate config and flags, then exit");
   l->callback([lf] {
     const int rc = RunLearner(*lf);
@@ -807,6 +847,7 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   a->add_option("--actor-id", af->actor_id, "actor id (default: hash of the host name)");
   a->add_option("--envs", af->envs, "envs in this process (default: cluster.envs_per_actor)");
   a->add_option("--max-segments", af->max_segments, "stop after this many segments per env");
+  a->add_option("--set", af->sets, "override a config field: section.field=VALUE (repeatable)");
   a->add_flag("--check-config", af->check_config, "validate config and flags, then exit");
   a->callback([af] { RunActor(*af); });
 
@@ -819,6 +860,12 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   t->add_option("--run-dir", tf->run_dir, "run directory (default: runs/<config name>)");
   t->add_flag("--resume", tf->resume, "continue the run in --run-dir");
   t->add_option("--max-updates", tf->max_updates, "stop after this many updates (0: never)");
+  t->add_option("--set", tf->sets, "override a config field: section.field=VALUE (repeatable)");
+  t->add_option("--max-samples", tf->max_samples,
+                "end the run after this many samples (cluster.max_samples; 0: the config's)");
+  t->add_option("--target-success", tf->target_success,
+                "end the run at this success rate over cluster.target_window judged episodes "
+                "(cluster.target_success; 0: the config's)");
   t->add_option("--rollout-port", tf->rollout_port, "loopback rollout port");
   t->add_option("--weights-port", tf->weights_port, "loopback weights port");
   t->add_option("--metrics-port", tf->metrics_port, "Prometheus /metrics port");

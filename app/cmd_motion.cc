@@ -5,6 +5,7 @@
 #include <iostream>
 #include <map>
 
+#include "common/paths.h"
 #include "app/commands.h"
 #include "common/json_util.h"
 #include "envs/humanoid_env.h"
@@ -27,10 +28,10 @@ struct RetargetArgs {
   std::vector<std::string> bvh;
   std::string out;
   std::string config;
-  std::string model = HumanoidModel::DefaultPath();
-  std::string motions = std::string(PERCH_SOURCE_DIR) + "/data/motions";
-  std::string bvh_dir = std::string(PERCH_SOURCE_DIR) + "/../shared/mocap";
-  std::string reference_dir = std::string(PERCH_SOURCE_DIR) + "/../shared/reference";
+  std::string model = "data/humanoid.json";
+  std::string motions = "data/motions";
+  std::string bvh_dir = "../shared/mocap";  // beside the data root
+  std::string reference_dir = "../shared/reference";
   bool check = false;
   bool compare = false;
   bool json = false;
@@ -46,7 +47,7 @@ std::string FindBvh(const RetargetArgs& a, const std::string& name) {
   for (const auto& p : a.bvh) {
     if (Basename(p) == name) return p;
   }
-  const std::string p = a.bvh_dir + "/" + name;
+  const std::string p = ResolveProjectPath(a.bvh_dir) + "/" + name;
   if (fs::exists(p)) return p;
   throw ConfigError("source BVH '" + name + "' not given on the command line and not in " +
                     a.bvh_dir);
@@ -54,7 +55,7 @@ std::string FindBvh(const RetargetArgs& a, const std::string& name) {
 
 void RunRetarget(const RetargetArgs& a) {
   const RetargetConfig cfg = LoadConfig(a);
-  const HumanoidModel model = HumanoidModel::Load(a.model);
+  const HumanoidModel model = HumanoidModel::Load(ResolveProjectPath(a.model));
   if (a.bvh.empty()) throw ConfigError("retarget: give the source BVH files");
   if (a.out.empty()) throw ConfigError("retarget: --out DIR is required");
   std::map<std::string, BvhClip> clips;
@@ -99,8 +100,8 @@ void RunRetarget(const RetargetArgs& a) {
 
 void RunCheck(const RetargetArgs& a) {
   const RetargetConfig cfg = LoadConfig(a);
-  const HumanoidModel model = HumanoidModel::Load(a.model);
-  const std::string dir = a.out.empty() ? a.motions : a.out;
+  const HumanoidModel model = HumanoidModel::Load(ResolveProjectPath(a.model));
+  const std::string dir = a.out.empty() ? ResolveProjectPath(a.motions) : a.out;
   Json report = Json::array();
   for (const ClipSpec& spec : cfg.clips) {
     const std::string p = dir + "/" + spec.name + ".json";
@@ -110,7 +111,7 @@ void RunCheck(const RetargetArgs& a) {
     const BvhClip bvh = ReadBvhFile(FindBvh(a, src));
     std::cerr << "check " << spec.name << " (" << src << ")\n";
     Json stats = EvaluateMotion(m, TargetsForMotion(m, bvh, model, cfg), model, cfg);
-    if (a.compare) stats["compare_reference"] = CompareWithReference(m, a.reference_dir);
+    if (a.compare) stats["compare_reference"] = CompareWithReference(m, ResolveProjectPath(a.reference_dir));
     report.push_back(stats);
   }
   if (a.json) {
@@ -126,7 +127,7 @@ void RunCheck(const RetargetArgs& a) {
 // `perch motion track`: plays a clip in the physics env with PD tracking only (no learning).
 struct TrackArgs {
   std::string name;
-  std::string motions = std::string(PERCH_SOURCE_DIR) + "/data/motions";
+  std::string motions = "data/motions";
   std::string env_config;  // optional EnvConfig JSON (action mode is forced to PD)
   double seconds = 0.0;    // 0: the clip's duration (a loop: 5 cycles)
   // Fallen when the torso is below this height [m]; authors' alive tests (notes 4.2): 0.78 for
@@ -138,7 +139,7 @@ struct TrackArgs {
 };
 
 void RunTrack(const TrackArgs& a) {
-  const std::string path = a.motions + "/" + a.name + ".json";
+  const std::string path = ResolveProjectPath(a.motions) + "/" + a.name + ".json";
   ReferenceMotion ref = ReferenceMotion::Load(path);
   EnvConfig cfg = a.env_config.empty() ? EnvConfig() : EnvConfig::Load(a.env_config);
   cfg.action_mode = ActionMode::kPd;
@@ -236,7 +237,7 @@ void RegisterMotionCommands(CLI::App& root, CLI::App& bench) {
   tr->callback([t] { RunTrack(*t); });
   struct ExportArgs {
     std::string name, out;
-    std::string motions = std::string(PERCH_SOURCE_DIR) + "/data/motions";
+    std::string motions = "data/motions";
     double seconds = 0.0;
   };
   auto e = std::make_shared<ExportArgs>();
@@ -248,12 +249,12 @@ void RegisterMotionCommands(CLI::App& root, CLI::App& bench) {
   ex->add_option("--seconds", e->seconds, "how long (default: the clip; a loop can run longer)");
   ex->callback([e] {
     const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
-    const ReferenceMotion m = ReferenceMotion::Load(e->motions + "/" + e->name + ".json");
+    const ReferenceMotion m = ReferenceMotion::Load(ResolveProjectPath(e->motions) + "/" + e->name + ".json");
     SaveBvhFile(e->out, HumanoidMotionToBvh(model, m, m.frame_time(), e->seconds));
     std::cerr << "wrote " << e->out << "\n";
   });
   struct BenchArgs {
-    std::string bvh = std::string(PERCH_SOURCE_DIR) + "/../shared/mocap/08_01.bvh";
+    std::string bvh = "../shared/mocap/08_01.bvh";
     int last_frame = 30;
     bool json = false;
   };
@@ -266,7 +267,7 @@ void RegisterMotionCommands(CLI::App& root, CLI::App& bench) {
   br->callback([bb] {
     using Clock = std::chrono::steady_clock;
     const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
-    const BvhClip bvh = ReadBvhFile(bb->bvh);
+    const BvhClip bvh = ReadBvhFile(ResolveProjectPath(bb->bvh));
     RetargetConfig cfg;
     ClipSpec spec = cfg.clips[0];
     spec.loop = false;

@@ -87,7 +87,7 @@ const std::map<std::string, std::string>& ZonePhases() {
 }
 
 struct ProfileArgs {
-  std::string config = std::string(PERCH_SOURCE_DIR) + "/configs/default.json";
+  std::string config = "configs/default.json";
   std::string model;  // empty: the config's freshly initialised policy
   int steps = 3000;
   uint64_t seed = 0;

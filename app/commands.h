@@ -15,5 +15,6 @@ void RegisterVizCommands(CLI::App& root, CLI::App& bench);      // app/cmd_viz.c
 void RegisterEvalCommands(CLI::App& root, CLI::App& bench);     // app/cmd_eval.cc
 void RegisterProfileCommands(CLI::App& root, CLI::App& bench);  // app/cmd_profile.cc
 void RegisterViewCommands(CLI::App& root, CLI::App& bench);     // app/cmd_view.cc
+void RegisterInfoCommands(CLI::App& root, CLI::App& bench);     // app/cmd_info.cc
 
 }  // namespace perch

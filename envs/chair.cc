@@ -4,6 +4,8 @@
 #include <cmath>
 #include <filesystem>
 
+#include "common/paths.h"
+
 namespace perch {
 namespace {
 
@@ -74,12 +76,12 @@ std::vector<ChairBox> BuildParametric(const Json& p, const std::string& ctx) {
 }  // namespace
 
 std::string Chair::PresetPath(const std::string& preset) {
-  return std::string(PERCH_SOURCE_DIR) + "/data/chairs/" + preset + ".json";
+  return ResolveProjectPath("data/chairs/" + preset + ".json");
 }
 
 std::vector<std::string> Chair::PresetNames() {
   std::vector<std::string> names;
-  const std::filesystem::path dir = std::filesystem::path(PERCH_SOURCE_DIR) / "data" / "chairs";
+  const std::filesystem::path dir = std::filesystem::path(ResolveProjectPath("data/chairs"));
   for (const auto& e : std::filesystem::directory_iterator(dir)) {
     if (e.path().extension() == ".json") names.push_back(e.path().stem().string());
   }

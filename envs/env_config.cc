@@ -3,13 +3,12 @@
 #include <algorithm>
 #include <cmath>
 
+#include "common/paths.h"
+
 namespace perch {
 namespace {
 
-std::string Resolve(const std::string& path) {
-  if (path.empty() || path[0] == '/') return path;
-  return std::string(PERCH_SOURCE_DIR) + "/" + path;
-}
+std::string Resolve(const std::string& path) { return ResolveProjectPath(path); }
 
 void CheckRange(const std::array<double, 2>& r, const std::string& where) {
   if (!(r[0] >= 0.0 && r[0] <= r[1] && r[1] <= 180.0)) {

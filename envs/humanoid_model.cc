@@ -8,6 +8,7 @@
 #include <Eigen/Eigenvalues>
 
 #include "common/json_util.h"
+#include "common/paths.h"
 
 namespace perch {
 namespace {
@@ -92,7 +93,7 @@ void GeomMassProperties(const Geom& g, double density, double* mass, Eigen::Vect
   *inertia = rot * local * rot.transpose();
 }
 
-std::string HumanoidModel::DefaultPath() { return std::string(PERCH_SOURCE_DIR) + "/data/humanoid.json"; }
+std::string HumanoidModel::DefaultPath() { return ResolveProjectPath("data/humanoid.json"); }
 
 HumanoidModel HumanoidModel::Load(const std::string& path) {
   const Json root = LoadJsonFile(path);

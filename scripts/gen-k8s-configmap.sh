@@ -16,6 +16,11 @@ metadata:
 data:
   config.json: |
 HDR
-  sed 's/^/    /' "$CONFIG"
+  # A config with a `base` is composed first (the pods see only this one file).
+  if grep -q '"base"' "$CONFIG"; then
+    "${PERCH:-perch}" config --config "$CONFIG" | sed 's/^/    /'
+  else
+    sed 's/^/    /' "$CONFIG"
+  fi
 } > k8s/configmap.yaml
 echo "wrote k8s/configmap.yaml from $CONFIG"

@@ -1,5 +1,6 @@
 #include "tasks/task_env.h"
 
+#include "common/config_file.h"
 #include "tasks/fall_restart.h"
 
 namespace perch {
@@ -54,7 +55,7 @@ TaskEnvConfig TaskEnvConfig::FromJson(const Json& j, const std::string& ctx) {
 }
 
 TaskEnvConfig TaskEnvConfig::Load(const std::string& path) {
-  const Json j = LoadJsonFile(path);
+  const Json j = LoadComposedConfig(path);  // a `base` config counts (common/config_file.h)
   // An experiment config (configs/default.json, a run's config.json) carries the env in "env".
   if (j.is_object() && j.contains("env") && j["env"].is_object()) {
     return FromJson(j["env"], path + ": env");

@@ -36,7 +36,7 @@ TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
   CheckKnownKeys(
       j,
       {"reward_variant", "motion_file", "similarity", "rot_weight", "rot_alpha", "root_vel_weight",
-       "root_vel_alpha", "hold_phase", "hold_pose_weight", "hold_energy_weight", "energy",
+       "root_vel_alpha", "hold_phase", "hold_pose_weight", "hold_energy_weight", "hold_yaw_weight", "hold_yaw_alpha", "energy",
        "yaw_offset_max_deg", "rsi_prob", "rsi_max_fraction", "min_root_z", "max_yaw_error_deg", "max_episode_steps",
        "start_joint_noise_rad", "success_after_end_s", "success_yaw_tol_deg", "start",
        "heading_goal", "heading_lookahead_s"},
@@ -58,6 +58,8 @@ TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
   GetOptional(j, "hold_phase", c.hold_phase, ctx);
   GetOptional(j, "hold_pose_weight", c.hold_pose_weight, ctx);
   GetOptional(j, "hold_energy_weight", c.hold_energy_weight, ctx);
+  GetOptional(j, "hold_yaw_weight", c.hold_yaw_weight, ctx);
+  GetOptional(j, "hold_yaw_alpha", c.hold_yaw_alpha, ctx);
   if (j.contains("energy")) c.energy = EnergyCostConfig::FromJson(j["energy"], ctx + ".energy");
   GetOptional(j, "yaw_offset_max_deg", c.yaw_offset_max_deg, ctx);
   GetOptional(j, "rsi_prob", c.rsi_prob, ctx);
@@ -91,7 +93,7 @@ TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
   if (!(c.success_after_end_s >= 0)) throw ConfigError(ctx + ".success_after_end_s: must be >= 0");
   if (!(c.success_yaw_tol_deg > 0)) throw ConfigError(ctx + ".success_yaw_tol_deg: must be > 0");
   for (double w : {c.rot_weight, c.rot_alpha, c.root_vel_weight, c.root_vel_alpha,
-                   c.hold_pose_weight, c.hold_energy_weight}) {
+                   c.hold_pose_weight, c.hold_energy_weight, c.hold_yaw_weight, c.hold_yaw_alpha}) {
     if (!(w >= 0)) throw ConfigError(ctx + ": reward weights and sharpness must be >= 0");
   }
   return c;
@@ -108,6 +110,8 @@ Json TurnTaskConfig::ToJson() const {
               {"hold_phase", hold_phase},
               {"hold_pose_weight", hold_pose_weight},
               {"hold_energy_weight", hold_energy_weight},
+              {"hold_yaw_weight", hold_yaw_weight},
+              {"hold_yaw_alpha", hold_yaw_alpha},
               {"energy", energy.ToJson()},
               {"yaw_offset_max_deg", yaw_offset_max_deg},
               {"rsi_prob", rsi_prob},
@@ -187,6 +191,9 @@ TaskStep TurnTask::OnStep(const HumanoidChairEnv& env, const float* action) {
   t.joint_vel = sim.joint_vel;
   t.rotation = RootRotationReward(rpy.data(), rpy_ref.data(), c_.rot_weight, c_.rot_alpha);
   t.yaw_error_rad = AngleDiff(rpy.z(), rpy_ref.z());
+  if (ClipEnded(k) && c_.hold_yaw_weight > 0) {
+    t.yaw = c_.hold_yaw_weight * std::exp(-c_.hold_yaw_alpha * t.yaw_error_rad * t.yaw_error_rad);
+  }
   if (c_.hold_phase && ClipEnded(k)) {
     t.similarity = c_.hold_pose_weight * t.pose;
     t.energy = c_.hold_energy_weight * EnergyCost(c_.energy, env, action);
@@ -199,7 +206,7 @@ TaskStep TurnTask::OnStep(const HumanoidChairEnv& env, const float* action) {
           RootVelocityReward(v.data(), v_ref.data(), c_.root_vel_weight, c_.root_vel_alpha);
     }
   }
-  t.total = t.similarity + t.rotation + t.root_vel + t.energy;
+  t.total = t.similarity + t.rotation + t.root_vel + t.energy + t.yaw;
   terms_ = t;
   RememberPose(env);
   TaskStep r;

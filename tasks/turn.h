@@ -28,6 +28,10 @@ struct TurnTaskConfig {
   bool hold_phase = false;       // authors: the reward changes once the clip has ended
   double hold_pose_weight = 0.5;
   double hold_energy_weight = 0.5;
+  // Ours (default off): once the clip has ended, + hold_yaw_weight exp(-hold_yaw_alpha dyaw^2)
+  // rewards ending on the reference's final heading, which success tests to 20 deg.
+  double hold_yaw_weight = 0.0;
+  double hold_yaw_alpha = 10.0;  // [1/rad^2]
   EnergyCostConfig energy;
   double yaw_offset_max_deg = 180.0;  // yaw offset ~ U(-max, max) per episode (notes 4.3)
   // Reference state initialisation (ours for turns; the paper starts turns at frame 0): with
@@ -63,7 +67,7 @@ struct TurnTaskConfig {
 };
 
 struct TurnTerms {
-  double pose = 0, joint_vel = 0, similarity = 0, rotation = 0, root_vel = 0, energy = 0;
+  double pose = 0, joint_vel = 0, similarity = 0, rotation = 0, root_vel = 0, energy = 0, yaw = 0;
   double total = 0;
   double yaw_error_rad = 0;  // wrap(yaw - reference yaw)
 };
@@ -87,7 +91,7 @@ class TurnTask : public ClipTask {
     const TurnTerms& t = terms_;
     return Json{{"pose", t.pose},       {"joint_vel", t.joint_vel},
                 {"similarity", t.similarity}, {"rotation", t.rotation},
-                {"root_vel", t.root_vel}, {"energy", t.energy},
+                {"root_vel", t.root_vel}, {"energy", t.energy}, {"yaw", t.yaw},
                 {"total", t.total},     {"yaw_error_rad", t.yaw_error_rad}};
   }
   // The step at which success is judged (clip end + success_after_end_s).

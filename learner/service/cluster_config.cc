@@ -21,7 +21,10 @@ Json ToJson(const ClusterConfig& c) {
               {"hierarchy_enabled", c.hierarchy_enabled},
               {"restart_backoff_ms", c.restart_backoff_ms},
               {"learner_queue_segments", c.learner_queue_segments},
-              {"init_from", c.init_from}};
+              {"init_from", c.init_from},
+              {"max_samples", c.max_samples},
+              {"target_success", c.target_success},
+              {"target_window", c.target_window}};
 }
 
 namespace {
@@ -39,7 +42,8 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
       {"task", "segment_steps", "envs_per_actor", "max_policy_lag", "checkpoint_every", "keep_last",
        "milestone_every", "heartbeat_s", "actor_timeout_s", "max_message_bytes",
        "max_segment_steps", "reconnect_ivl_ms", "hierarchy_meta_period", "hierarchy_enabled",
-       "restart_backoff_ms", "learner_queue_segments", "init_from"},
+       "restart_backoff_ms", "learner_queue_segments", "init_from", "max_samples",
+       "target_success", "target_window"},
       ctx);
   ClusterConfig c;
   GetOptional(j, "task", c.task, ctx);
@@ -59,6 +63,9 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "restart_backoff_ms", c.restart_backoff_ms, ctx);
   GetOptional(j, "learner_queue_segments", c.learner_queue_segments, ctx);
   GetOptional(j, "init_from", c.init_from, ctx);
+  GetOptional(j, "max_samples", c.max_samples, ctx);
+  GetOptional(j, "target_success", c.target_success, ctx);
+  GetOptional(j, "target_window", c.target_window, ctx);
   c.task = TaskName(TaskFromName(c.task, ctx + ".task"));  // one spelling from here on
   CheckMin(ctx, "segment_steps", c.segment_steps, 1);
   CheckMin(ctx, "envs_per_actor", c.envs_per_actor, 1);
@@ -74,6 +81,11 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   CheckMin(ctx, "hierarchy_meta_period", c.hierarchy_meta_period, 1);
   CheckMin(ctx, "restart_backoff_ms", c.restart_backoff_ms, 0);
   CheckMin(ctx, "learner_queue_segments", c.learner_queue_segments, 1);
+  if (c.max_samples < 0) throw ConfigError(ctx + ".max_samples: must be >= 0 (0: no budget)");
+  if (!(c.target_success >= 0.0 && c.target_success <= 1.0)) {
+    throw ConfigError(ctx + ".target_success: must be in [0, 1] (0: no target)");
+  }
+  CheckMin(ctx, "target_window", c.target_window, 1);
   if (c.segment_steps > c.max_segment_steps) {
     throw ConfigError(ctx + ".segment_steps: " + std::to_string(c.segment_steps) +
                       " exceeds max_segment_steps " + std::to_string(c.max_segment_steps));

@@ -36,6 +36,13 @@ struct ClusterConfig {
   // normalizer: fine-tuning, e.g. walk stage 2 from stage 1 (notes §8.2 "init"). Adam, reward
   // scaling and counters start fresh. Empty: from scratch. Relative paths: the project root.
   std::string init_from;
+  // A run ends by itself (final checkpoint, summary) once trained on max_samples env steps (0: no
+  // budget; the console then shows percent done and an ETA), or once the success rate over the
+  // newest target_window judged episodes reaches target_success (0: no target; tasks with a
+  // success test only). Both ours; `perch train/learner --max-samples/--target-success` set them.
+  int64_t max_samples = 0;
+  double target_success = 0.0;
+  int target_window = 200;
 };
 
 Json ToJson(const ClusterConfig& c);

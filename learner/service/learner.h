@@ -20,6 +20,7 @@
 #include "learner/rollout.h"
 #include "learner/service/checkpoint.h"
 #include "learner/service/cluster_config.h"
+#include "learner/service/progress.h"
 #include "learner/service/metrics_http.h"
 #include "learner/service/wire.h"
 
@@ -33,6 +34,7 @@ struct LearnerSetup {
   ClusterConfig cluster;
   Json resolved_config;    // the whole experiment config, saved into the run dir and checkpoints
   std::string compat_key;  // must match a checkpoint to resume from it
+  double control_dt = 0.0;  // [s] per env step, for the console (0: lengths in steps)
 };
 
 struct LearnerOptions {
@@ -73,6 +75,9 @@ class LearnerService {
   int metrics_port() const { return metrics_ ? metrics_->port() : -1; }
   const std::string& resumed_from() const { return resumed_from_; }
   std::string SaveCheckpoint();  // returns its path
+  // Why Run() returned: "max_samples", "target_success", "max_updates" or "stopped".
+  const std::string& stop_reason() const { return stop_reason_; }
+  const RunProgress* progress() const { return progress_.get(); }
 
  private:
   void HandleRollout(const zmq::message_t& msg);
@@ -124,6 +129,9 @@ class LearnerService {
   double last_update_s_ = 0.0;
   double train_time_base_s_ = 0.0;
   int64_t last_checkpoint_update_ = -1;
+  std::string last_checkpoint_path_;
+  std::unique_ptr<RunProgress> progress_;  // created when Run() starts
+  std::string stop_reason_;
 };
 
 // Seconds on the monotonic clock.

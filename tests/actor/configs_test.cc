@@ -10,6 +10,7 @@
 
 #include "actor/experiment.h"
 #include "actor/role_setup.h"
+#include "common/config_file.h"
 #include "common/json_util.h"
 #include "common/paths.h"
 #include "tasks/task_env.h"
@@ -21,15 +22,16 @@ namespace fs = std::filesystem;
 
 TEST(CommittedConfigs, EveryConfigLoadsAndItsInitFromExists) {
   std::vector<fs::path> files;
-  for (const auto& e : fs::directory_iterator(fs::path(PERCH_SOURCE_DIR) / "configs")) {
+  // configs/ and configs/experiments/ (branches name a `base`).
+  for (const auto& e : fs::recursive_directory_iterator(fs::path(PERCH_SOURCE_DIR) / "configs")) {
     if (e.path().extension() == ".json") files.push_back(e.path());
   }
   std::sort(files.begin(), files.end());
-  ASSERT_GE(files.size(), 5u);
+  ASSERT_GE(files.size(), 30u);
   int experiments = 0, task_configs = 0;
   for (const fs::path& f : files) {
     SCOPED_TRACE(f.string());
-    const Json j = LoadJsonFile(f.string());
+    const Json j = LoadComposedConfig(f.string());
     if (j.contains("cluster")) {
       ++experiments;
       ExperimentConfig cfg;

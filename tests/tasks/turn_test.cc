@@ -205,6 +205,32 @@ TEST(TurnTask, RewardIsSimilarityPlusRootRotationAndTheAuthorsHoldPhase) {
   }
 }
 
+TEST(TurnTask, HoldYawTermRewardsTheFinalHeadingOnlyAfterTheClip) {
+  // No early termination, so zero actions reach the hold phase however badly they do.
+  auto env = MakeTurnEnv("turn_left", Json{{"hold_yaw_weight", 0.4},
+                                           {"hold_yaw_alpha", 5.0},
+                                           {"min_root_z", 0.0},
+                                           {"max_yaw_error_deg", 180.0}});
+  std::vector<float> obs(env->spec().obs_dim), next(obs.size());
+  std::vector<float> zero(env->spec().act_dim, 0.0f);
+  env->Seed(3);
+  env->Reset(obs.data());
+  const int end = TaskOf(*env).ClipEndStep();
+  for (int k = 1; k <= end + 2; ++k) {
+    const StepResult r = env->Step(zero.data(), next.data());
+    ASSERT_FALSE(r.terminated) << k;
+    const TurnTerms& t = TaskOf(*env).last_terms();
+    if (k < end) {
+      EXPECT_EQ(t.yaw, 0.0) << k;
+    } else {
+      EXPECT_NEAR(t.yaw, 0.4 * std::exp(-5.0 * t.yaw_error_rad * t.yaw_error_rad), 1e-9) << k;
+      EXPECT_GT(t.yaw, 0.0);
+    }
+    EXPECT_NEAR(r.reward, t.similarity + t.rotation + t.root_vel + t.energy + t.yaw, 1e-5) << k;
+  }
+  EXPECT_THROW(MakeTurnEnv("turn_left", Json{{"hold_yaw_weight", -1.0}}), ConfigError);
+}
+
 TEST(TurnTask, ConfigErrorsNameTheField) {
   auto err = [](const Json& j) {
     try {

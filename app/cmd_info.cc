@@ -1,0 +1,56 @@
+// `perch version`: what this binary is and where it finds its data (issue 18: an installed
+// binary must not depend on a source checkout).
+#include <iostream>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "actor/experiment.h"
+#include "app/commands.h"
+#include "common/config_file.h"
+#include "common/json_util.h"
+#include "common/paths.h"
+#include "tasks/recording.h"
+
+namespace perch {
+
+void RegisterInfoCommands(CLI::App& root, CLI::App& /*bench*/) {
+  auto json = std::make_shared<bool>(false);
+  CLI::App* v = root.add_subcommand("version", "This binary's version and where it finds its data");
+  v->add_flag("--json", *json, "print one JSON object on stdout");
+  v->callback([json] {
+    const DataRootInfo d = FindDataRoot();
+    const Json j{{"version", PerchVersion()},
+                 {"executable", ExecutablePath()},
+                 {"data_root", d.root},
+                 {"data_origin", d.origin}};
+    if (*json) {
+      std::cout << j.dump() << "\n";
+    } else {
+      std::cout << "perch " << PerchVersion() << "\nexecutable: " << ExecutablePath()
+                << "\ndata: " << d.root << " (" << d.origin << ")\n";
+    }
+  });
+
+  // perch config: what a config composes to (its bases and --set applied), or with --resolved
+  // every field with its default, as the run dir's config.json will hold it.
+  struct ConfigArgs {
+    std::string config;
+    std::vector<std::string> sets;
+    bool resolved = false;
+  };
+  auto c = std::make_shared<ConfigArgs>();
+  CLI::App* cc = root.add_subcommand("config", "Print a config as composed (base, --set) or fully resolved");
+  cc->add_option("--config", c->config, "experiment config (JSON)")->required();
+  cc->add_option("--set", c->sets, "override a config field: section.field=VALUE (repeatable)");
+  cc->add_flag("--resolved", c->resolved, "validate and fill in every default (as a run records it)");
+  cc->callback([c] {
+    if (c->resolved) {
+      std::cout << ToJson(LoadExperimentConfig(c->config, c->sets)).dump(2) << "\n";
+    } else {
+      std::cout << LoadComposedConfig(c->config, c->sets).dump(2) << "\n";
+    }
+  });
+}
+
+}  // namespace perch

@@ -1,0 +1,147 @@
+// The perch program's command line as a new user meets it (issue 18): typos are named with the
+// nearest valid name, help shows defaults, --data-dir and `perch version` say where data comes
+// from, and a mock training run ends by itself at --max-samples with its summary.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "common/json_util.h"
+
+namespace perch {
+namespace {
+
+struct Result {
+  int code;
+  std::string out;  // stdout and stderr
+};
+
+Result Perch(const std::string& args, bool with_stderr = true) {
+  const std::string cmd =
+      std::string(std::getenv("PERCH_BIN")) + " " + args + (with_stderr ? " 2>&1" : " 2>/dev/null");
+  FILE* p = popen(cmd.c_str(), "r");
+  if (p == nullptr) return {-1, ""};
+  std::string out;
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) out.append(buf, n);
+  const int status = pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+bool Has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+class CliTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (std::getenv("PERCH_BIN") == nullptr) GTEST_SKIP() << "PERCH_BIN not set (run via ctest)";
+  }
+};
+
+TEST_F(CliTest, MisspelledOptionsAndSubcommandsAreNamedWithTheNearestValidName) {
+  Result r = Perch("train --conifg configs/default.json");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_TRUE(Has(r.out, "--conifg: unknown option of 'perch train'; did you mean --config?")) << r.out;
+  r = Perch("eval --model x.bin --episode 3");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_TRUE(Has(r.out, "--episode: unknown option of 'perch eval'; did you mean --episodes?")) << r.out;
+  r = Perch("evaluate --model x.bin");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_TRUE(Has(r.out, "'evaluate': unknown subcommand of 'perch'; did you mean 'eval'?")) << r.out;
+  r = Perch("bench clustr");
+  EXPECT_TRUE(Has(r.out, "did you mean 'cluster'?")) << r.out;
+  // Nothing near: named, no guess.
+  r = Perch("train --zzzzzzzz 1");
+  EXPECT_TRUE(Has(r.out, "--zzzzzzzz: unknown option")) << r.out;
+  EXPECT_FALSE(Has(r.out, "did you mean")) << r.out;
+  // An option's value that looks like a subcommand is not mistaken for one.
+  r = Perch("train --config eval --check-nothing");
+  EXPECT_TRUE(Has(r.out, "--check-nothing: unknown option")) << r.out;
+}
+
+TEST_F(CliTest, HelpShowsDefaults) {
+  const Result r = Perch("train --help");
+  EXPECT_EQ(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "--actors")) << r.out;
+  EXPECT_TRUE(Has(r.out, "--actors INT=2")) << r.out;
+  EXPECT_TRUE(Has(r.out, "--rollout-port INT=5555")) << r.out;
+  EXPECT_TRUE(Has(Perch("--help").out, "--data-dir"));
+}
+
+TEST_F(CliTest, VersionNamesTheDataRootAndDataDirOverridesIt) {
+  Result r = Perch("version --json");
+  ASSERT_EQ(r.code, 0) << r.out;
+  Json j = Json::parse(r.out);
+  EXPECT_EQ(j["data_origin"], "source");  // a dev build run from its build tree
+  EXPECT_EQ(std::filesystem::path(j["data_root"].get<std::string>()),
+            std::filesystem::path(PERCH_SOURCE_DIR).lexically_normal());
+  r = Perch(std::string("--data-dir ") + PERCH_SOURCE_DIR + " version --json");
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(Json::parse(r.out)["data_origin"], "flag");
+  r = Perch("version --json --data-dir /nonexistent");
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "--data-dir /nonexistent: no data/humanoid.json there")) << r.out;
+}
+
+TEST_F(CliTest, SetAndBaseComposeAndBadOverridesAreNamed) {
+  // --set reaches the config: a value that breaks validation is reported with its field.
+  Result r = Perch(std::string("learner --config ") + PERCH_SOURCE_DIR +
+                   "/configs/mock.json --run-dir /tmp/unused --check-config --set ppo.num_epochs=0");
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_TRUE(Has(r.out, "ppo.num_epochs")) << r.out;
+  r = Perch(std::string("learner --config ") + PERCH_SOURCE_DIR +
+            "/configs/mock.json --run-dir /tmp/unused --check-config --set ppo.num_epochs=2");
+  EXPECT_EQ(r.code, 0) << r.out;
+  // A target on a task without a success test is refused by name.
+  r = Perch(std::string("learner --config ") + PERCH_SOURCE_DIR +
+            "/configs/default.json --run-dir /tmp/unused --check-config --target-success 0.9");
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_TRUE(Has(r.out, "cluster.target_success: task \"walk\" has no success test")) << r.out;
+}
+
+TEST_F(CliTest, EvalUsesTheCheckpointsConfigAndWarnsWhenConfigDiffers) {
+  // The stage-2 walker's checkpoint knows it walks toward targets: without --config, eval
+  // measures that stage, not the forward stage of the defaults.
+  const std::string model =
+      std::string(PERCH_SOURCE_DIR) + "/models/walk_stage2_fallrestart/checkpoints/ckpt-0000013900.bin";
+  Result r = Perch("eval --model " + model + " --episodes 1 --json", /*with_stderr=*/false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Json j = Json::parse(r.out);
+  EXPECT_EQ(j["task"], "walk");
+  EXPECT_EQ(j["config"]["walk"]["stage"], "target") << r.out;
+  r = Perch("eval --model " + model + " --config " + PERCH_SOURCE_DIR +
+            "/configs/default.json --episodes 1 --json");
+  EXPECT_TRUE(Has(r.out, "differs from the config saved with")) << r.out;
+}
+
+TEST_F(CliTest, TrainEndsByItselfAtMaxSamplesWithASummary) {
+  // A fresh clone has no runs/: train creates the run dir's parents.
+  const std::string dir = ::testing::TempDir() + "perch_cli_train/nested/run";
+  std::filesystem::remove_all(::testing::TempDir() + "perch_cli_train");
+  const int port = 21000 + (getpid() % 2000) * 3;
+  const Result r = Perch(std::string("train --config ") + PERCH_SOURCE_DIR +
+                         "/configs/mock.json --actors 1 --run-dir " + dir +
+                         " --max-samples 3000 --set ppo.steps_per_update=1024 --rollout-port " +
+                         std::to_string(port) + " --weights-port " + std::to_string(port + 1) +
+                         " --metrics-port " + std::to_string(port + 2));
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_TRUE(Has(r.out, "Run ended (max_samples)")) << r.out;
+  EXPECT_TRUE(Has(r.out, "of 3000")) << r.out;  // the console's budget
+  const Json cfg = LoadJsonFile(dir + "/config.json");
+  EXPECT_EQ(cfg["cluster"]["max_samples"], 3000);
+  EXPECT_EQ(cfg["ppo"]["steps_per_update"], 1024);
+  EXPECT_TRUE(std::filesystem::exists(dir + "/logs"));
+  // The run stopped at the first update past the budget, not long after.
+  int64_t samples = 0;
+  std::ifstream in(dir + "/metrics.jsonl");
+  for (std::string line; std::getline(in, line);) samples = Json::parse(line)["samples"].get<int64_t>();
+  EXPECT_GE(samples, 3000);
+  EXPECT_LT(samples, 3000 + 4 * 1024);
+}
+
+}  // namespace
+}  // namespace perch
