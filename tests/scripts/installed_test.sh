@@ -18,6 +18,23 @@ if [[ "${PERCH_INSTALLED_TEST_INSIDE:-}" != 1 ]]; then
   trap 'rm -rf "$tmp"' EXIT
   cmake --install "$build" --prefix "$tmp/prefix" > "$tmp/install.log"
   cp "$0" "$tmp/checks.sh"
+  # The image's runtime stage and the .deb install every library the binary links directly
+  # (their own dependencies come with them); the C and C++ runtimes are in every Debian.
+  runtime=$(sed -n '/^FROM debian:12$/,$p' "$src/Dockerfile" | tr -s ' \\\n' ' ')
+  debdeps=$(grep -A2 'CPACK_DEBIAN_PACKAGE_DEPENDS' "$src/CMakeLists.txt" | tr -d '"')
+  for lib in $(readelf -d "$tmp/prefix/bin/perch" | sed -n 's/.*Shared library: \[\(.*\)\]/\1/p'); do
+    path=$(ldconfig -p | awk -v l="$lib" '$1 == l && !found {print $NF; found = 1}')
+    [[ -n "$path" ]] || { echo "FAIL: $lib not found by ldconfig" >&2; exit 1; }
+    real=$(readlink -f "$path")
+    pkg=$(dpkg -S "$real" 2> /dev/null | head -1 | cut -d: -f1 || true)
+    # Merged /usr: dpkg may know the file under /lib.
+    [[ -n "$pkg" ]] || pkg=$(dpkg -S "${real#/usr}" 2> /dev/null | head -1 | cut -d: -f1 || true)
+    [[ -n "$pkg" ]] || { echo "FAIL: no Debian package owns $real ($lib)" >&2; exit 1; }
+    case "$pkg" in libc6 | libstdc++6 | libgcc-s1) continue ;; esac
+    grep -qw -- "$pkg" <<< "$runtime" || { echo "FAIL: Dockerfile runtime stage lacks $pkg ($lib)" >&2; exit 1; }
+    grep -qw -- "$pkg" <<< "$debdeps" || { echo "FAIL: CPACK_DEBIAN_PACKAGE_DEPENDS lacks $pkg ($lib)" >&2; exit 1; }
+    echo "runtime library $lib: $pkg in the image and the .deb"
+  done
   # The manifests and the ConfigMap, copied out before the source tree is hidden.
   mkdir -p "$tmp/k8s" && cp "$src"/k8s/*.yaml "$tmp/k8s/"
   export PERCH_INSTALLED_TEST_INSIDE=1 PERCH_TMP="$tmp" PERCH_SRC="$src"
