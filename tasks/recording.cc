@@ -56,8 +56,6 @@ void FillChair(const Chair& c, proto::RecChair* rc) {
 
 }  // namespace
 
-const char* PerchVersion() { return "perch " PERCH_GIT_COMMIT; }
-
 void EpisodeRecorder::Begin(const HumanoidChairEnv& env, int index, uint64_t env_seed,
                             const RecordingExtras& extras) {
   active_ = max_episodes_ <= 0 || begun_ < max_episodes_;

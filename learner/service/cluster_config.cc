@@ -1,5 +1,6 @@
 #include "learner/service/cluster_config.h"
 
+#include <cmath>
 #include <cstdlib>
 
 namespace perch {
@@ -16,6 +17,7 @@ Json ToJson(const ClusterConfig& c) {
               {"actor_timeout_s", c.actor_timeout_s},
               {"max_message_bytes", c.max_message_bytes},
               {"max_segment_steps", c.max_segment_steps},
+              {"max_wire_value", c.max_wire_value},
               {"reconnect_ivl_ms", c.reconnect_ivl_ms},
               {"hierarchy_meta_period", c.hierarchy_meta_period},
               {"hierarchy_enabled", c.hierarchy_enabled},
@@ -41,7 +43,7 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
       j,
       {"task", "segment_steps", "envs_per_actor", "max_policy_lag", "checkpoint_every", "keep_last",
        "milestone_every", "heartbeat_s", "actor_timeout_s", "max_message_bytes",
-       "max_segment_steps", "reconnect_ivl_ms", "hierarchy_meta_period", "hierarchy_enabled",
+       "max_segment_steps", "max_wire_value", "reconnect_ivl_ms", "hierarchy_meta_period", "hierarchy_enabled",
        "restart_backoff_ms", "learner_queue_segments", "init_from", "max_samples",
        "target_success", "target_window"},
       ctx);
@@ -57,6 +59,7 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "actor_timeout_s", c.actor_timeout_s, ctx);
   GetOptional(j, "max_message_bytes", c.max_message_bytes, ctx);
   GetOptional(j, "max_segment_steps", c.max_segment_steps, ctx);
+  GetOptional(j, "max_wire_value", c.max_wire_value, ctx);
   GetOptional(j, "reconnect_ivl_ms", c.reconnect_ivl_ms, ctx);
   GetOptional(j, "hierarchy_meta_period", c.hierarchy_meta_period, ctx);
   GetOptional(j, "hierarchy_enabled", c.hierarchy_enabled, ctx);
@@ -77,6 +80,9 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   CheckMin(ctx, "actor_timeout_s", c.actor_timeout_s, 0.01);
   CheckMin(ctx, "max_message_bytes", c.max_message_bytes, 1024);
   CheckMin(ctx, "max_segment_steps", c.max_segment_steps, 1);
+  if (!(c.max_wire_value > 0 && std::isfinite(c.max_wire_value))) {
+    throw ConfigError(ctx + ".max_wire_value: must be finite and > 0");
+  }
   CheckMin(ctx, "reconnect_ivl_ms", c.reconnect_ivl_ms, 1);
   CheckMin(ctx, "hierarchy_meta_period", c.hierarchy_meta_period, 1);
   CheckMin(ctx, "restart_backoff_ms", c.restart_backoff_ms, 0);

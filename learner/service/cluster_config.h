@@ -25,6 +25,7 @@ struct ClusterConfig {
   double actor_timeout_s = 30.0;     // an actor silent this long is counted as gone
   int max_message_bytes = 64 << 20;  // bigger messages are dropped unparsed
   int max_segment_steps = 8192;      // T above this is rejected
+  double max_wire_value = 1e6;       // |x| above this in a segment is rejected (ours; issue 17)
   int reconnect_ivl_ms = 200;        // ZeroMQ reconnect interval
   int hierarchy_meta_period = 30;    // control steps per meta decision (notes §4.7)
   bool hierarchy_enabled = false;    // run the 2 Hz meta policy over the subtasks

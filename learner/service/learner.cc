@@ -23,6 +23,31 @@ double MonotonicSeconds() {
 
 namespace {
 
+template <typename R>
+bool FiniteRange(const R& r) {
+  for (auto v : r) {
+    if (!std::isfinite(static_cast<double>(v))) return false;
+  }
+  return true;
+}
+
+bool FiniteStats(const proto::RunningStats& s) {
+  return std::isfinite(s.count()) && FiniteRange(s.mean()) && FiniteRange(s.var());
+}
+
+// The first part of a trainer state that is not finite ("" when all is): weights, normaliser,
+// optimiser moments and reward-scaling statistics (issue 17: never publish or checkpoint NaN).
+std::string FirstNonFinite(const proto::LearnerState& s) {
+  if (!FiniteRange(s.model().params())) return "model.params";
+  if (!FiniteStats(s.model().obs_stats())) return "model.obs_stats";
+  if (!FiniteRange(s.adam().m()) || !FiniteRange(s.adam().v())) return "adam";
+  if (!FiniteStats(s.return_stats())) return "return_stats";
+  for (const proto::ReturnStream& r : s.return_streams()) {
+    if (!std::isfinite(r.ret())) return "return_streams";
+  }
+  return "";
+}
+
 void MakeDir(const std::string& path) {
   std::string cur;
   for (size_t i = 0; i <= path.size(); ++i) {
@@ -92,6 +117,7 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
   if (options_.run_dir.empty()) throw ConfigError("--run-dir: required");
   limits_.max_message_bytes = static_cast<size_t>(setup.cluster.max_message_bytes);
   limits_.max_segment_steps = setup.cluster.max_segment_steps;
+  limits_.max_abs_value = setup.cluster.max_wire_value;
   limits_.obs_dim = setup.policy.obs_dim;
   limits_.act_dim = setup.policy.action_size();
   ppo_ = std::make_unique<PpoLearner>(setup.policy, setup.ppo, setup.seed);
@@ -243,6 +269,12 @@ std::string LearnerService::SaveCheckpoint() {
   for (uint64_t w : st.s) c.mutable_rng()->add_s(w);
   c.mutable_rng()->set_has_spare(st.has_spare);
   c.mutable_rng()->set_spare(st.spare);
+  // Never a checkpoint of a non-finite state: the newest good one stays the newest.
+  if (const std::string bad = FirstNonFinite(c.trainer()); !bad.empty()) {
+    spdlog::error("learner: not writing a checkpoint at update {}: {} is not finite",
+                  counters_.updates(), bad);
+    return last_checkpoint_path_;
+  }
   Json record = setup_.resolved_config;
   record["seed"] = setup_.seed;
   c.set_resolved_config_json(record.dump());
@@ -331,6 +363,8 @@ bool LearnerService::HandleSegment(const proto::Segment& seg) {
   const uint64_t v = version();
   // Observation statistics are valid data whatever the policy version was.
   if (r.policy_version <= v) ppo_->AddObsStats(r.obs_stats_delta);
+  // Merged here, once: PPO's Update() would merge the rollout's delta again (issue 17).
+  r.obs_stats_delta.Reset(0.0);
   if (r.policy_version > v ||
       v - r.policy_version > static_cast<uint64_t>(setup_.cluster.max_policy_lag)) {
     // Too old, or from a version this learner never published (weights of a run past our last
@@ -365,8 +399,19 @@ int LearnerService::ActorsAlive() const {
 void LearnerService::Train() {
   const double t0 = MonotonicSeconds();
   UpdateStats u;
+  // The state before the update, to fall back to should the update leave anything non-finite.
+  proto::LearnerState before;
+  ppo_->ExportState(&before);
   try {
     u = ppo_->Update(batch_);
+    proto::LearnerState after;
+    ppo_->ExportState(&after);
+    if (const std::string bad = FirstNonFinite(after); !bad.empty()) {
+      ppo_->ImportState(before, "the state before a non-finite update");
+      ++nonfinite_updates_;
+      throw ConfigError("the update left " + bad + " non-finite; discarded, the last good weights "
+                        "stay published");
+    }
   } catch (const ConfigError& e) {
     // Every segment was validated on receipt; should PPO still refuse the batch, drop it rather
     // than stop the run.
@@ -472,6 +517,8 @@ void LearnerService::UpdateGauges() {
   m.Set("perch_weights_republished_total", stats_.weights_republished,
         "weights resent to (re)subscribing actors", "counter");
   m.Set("perch_weights_version", static_cast<double>(version()), "published weights version");
+  m.Set("perch_nonfinite_updates_total", static_cast<double>(nonfinite_updates_),
+        "PPO updates discarded because they left a non-finite weight or statistic", "counter");
 }
 
 void LearnerService::Run() {

@@ -78,6 +78,7 @@ class LearnerService {
   // Why Run() returned: "max_samples", "target_success", "max_updates" or "stopped".
   const std::string& stop_reason() const { return stop_reason_; }
   const RunProgress* progress() const { return progress_.get(); }
+  uint64_t nonfinite_updates() const { return nonfinite_updates_; }
 
  private:
   void HandleRollout(const zmq::message_t& msg);
@@ -131,6 +132,7 @@ class LearnerService {
   int64_t last_checkpoint_update_ = -1;
   std::string last_checkpoint_path_;
   std::unique_ptr<RunProgress> progress_;  // created when Run() starts
+  uint64_t nonfinite_updates_ = 0;         // updates discarded for non-finite results
   std::string stop_reason_;
 };
 

@@ -1,9 +1,22 @@
 #include "learner/service/wire.h"
 
+#include <algorithm>
 #include <cmath>
+#include <utility>
 
 namespace perch {
 namespace {
+
+// Index of the first |x| > bound, or -1.
+template <typename R>
+int FirstAbove(const R& r, double bound) {
+  int i = 0;
+  for (auto v : r) {
+    if (std::abs(static_cast<double>(v)) > bound) return i;
+    ++i;
+  }
+  return -1;
+}
 
 template <typename R>
 bool AllFinite(const R& r) {
@@ -41,6 +54,8 @@ const char* WireRejectName(WireReject r) {
       return "shape";
     case WireReject::kNonFinite:
       return "non_finite";
+    case WireReject::kRange:
+      return "out_of_range";
   }
   return "?";
 }
@@ -95,6 +110,36 @@ WireReject ValidateSegment(const proto::Segment& seg, const WireLimits& lim, std
   }
   for (double v : m.var()) {
     if (!std::isfinite(v) || v < 0) return *why = "bad obs_stats_delta.var", WireReject::kNonFinite;
+  }
+  // Finite but absurd: bounded by what a segment can hold and by max_abs_value.
+  auto range = [why](const std::string& msg) {
+    *why = msg;
+    return WireReject::kRange;
+  };
+  // The actor's delta counts this segment's steps (learner/rollout.cc): no more than T.
+  if (m.count() > static_cast<double>(t) + 1e-6) {
+    return range("obs_stats_delta.count " + std::to_string(m.count()) + " exceeds the segment's " +
+                 std::to_string(t) + " steps");
+  }
+  const double b = lim.max_abs_value;
+  const std::pair<const char*, int> arrays[] = {
+      {"obs", FirstAbove(s.obs(), b)},
+      {"actions", FirstAbove(s.actions(), b)},
+      {"log_probs", FirstAbove(s.log_probs(), b)},
+      {"values", FirstAbove(s.values(), b)},
+      {"rewards", FirstAbove(s.rewards(), b)},
+      {"bootstrap_values", FirstAbove(s.bootstrap_values(), b)},
+      {"obs_stats_delta.mean", FirstAbove(m.mean(), b)},
+      {"obs_stats_delta.var", FirstAbove(m.var(), b * b)}};
+  for (const auto& [name, i] : arrays) {
+    if (i >= 0) return range(std::string(name) + "[" + std::to_string(i) + "] above max_abs_value");
+  }
+  if (std::abs(seg.bootstrap_value()) > b) return range("bootstrap_value above max_abs_value");
+  for (const proto::EpisodeStats& e : seg.episodes()) {
+    if (!std::isfinite(e.episode_return())) return *why = "NaN episode_return", WireReject::kNonFinite;
+    if (std::abs(e.episode_return()) > b * std::max<double>(1, e.length()) || e.length() > (1u << 30)) {
+      return range("episode stats out of range");
+    }
   }
   return WireReject::kOk;
 }

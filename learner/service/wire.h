@@ -17,10 +17,13 @@ struct WireLimits {
   int obs_dim = 0;  // expected; 0 accepts any
   int act_dim = 0;  // action_size
   int max_pose_dim = 4096;
+  // |x| above this in any number of a segment is rejected before it touches learner state (a
+  // finite 1e30 would otherwise overflow the normaliser or the weights; issue 17).
+  double max_abs_value = 1e6;
 };
 
 // Why a message was rejected; kOk when accepted. Counted per kind in the learner's metrics.
-enum class WireReject { kOk, kTooBig, kParse, kVersion, kEmpty, kShape, kNonFinite };
+enum class WireReject { kOk, kTooBig, kParse, kVersion, kEmpty, kShape, kNonFinite, kRange };
 const char* WireRejectName(WireReject r);
 
 // Parses and validates an actor -> learner message.

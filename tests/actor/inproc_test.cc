@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -112,6 +114,60 @@ TEST(InprocTest, LearnerAndTwoActorsInOneProcessLearnTheMockTask) {
     }
   }
   EXPECT_GT(falls, 0);
+}
+
+TEST(InprocTest, ObservationStatisticsCountEachSampleOnce) {
+  // The learner merges a segment's observation statistics on receipt; PPO's update must not merge
+  // them again (it did: a checkpoint after N samples held count 2N, issue 17).
+  std::string dir;
+  const InprocRun r = RunInproc("obs-once", 8, 1, &dir);
+  std::string newest;
+  for (const auto& e : std::filesystem::directory_iterator(dir + "/checkpoints")) {
+    newest = std::max(newest, e.path().string());
+  }
+  const proto::Checkpoint c = ReadCheckpointFile(newest);
+  const double count = c.trainer().model().obs_stats().count();
+  const double trained = static_cast<double>(c.counters().samples());
+  ASSERT_GT(trained, 0.0);
+  EXPECT_GE(count, trained);                                   // every trained sample was seen
+  EXPECT_LE(count, static_cast<double>(r.actor_segments) * 64 + 1.0);  // none counted twice
+  EXPECT_LT(count, 1.5 * trained);
+}
+
+TEST(InprocTest, AnUpdateThatLeavesNonFiniteWeightsIsDiscarded) {
+  // A learning rate of 1e38 overflows the weights within a few updates. Each such update is
+  // undone: the published weights and every checkpoint stay finite, and it is counted (issue 17).
+  Json j = MockConfig();
+  j["ppo"]["learning_rate"] = 1e38;
+  const ExperimentConfig cfg = ExperimentConfigFromJson(j, "nonfinite");
+  LearnerOptions lo = InprocOptions("nonfinite", TempDir("nonfinite") + "/run");
+  std::atomic<bool> stop{false};
+  lo.stop = &stop;
+  zmq::context_t ctx(1);
+  LearnerService learner(ctx, MakeLearnerSetup(cfg), lo);
+  ActorOptions ao;
+  ao.rollout_connect = lo.rollout_bind;
+  ao.weights_connect = lo.weights_bind;
+  ao.num_envs = 2;
+  ao.stop = &stop;
+  ActorService actor(ctx, MakeActorSetup(cfg), ao);
+  std::thread actor_thread([&] { actor.Run(); });
+  std::thread watchdog([&] {
+    for (int i = 0; i < 600 && learner.nonfinite_updates() < 2; ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    stop = true;
+  });
+  learner.Run();
+  watchdog.join();
+  actor_thread.join();
+  EXPECT_GE(learner.nonfinite_updates(), 2u);
+  // The actor kept receiving weights it could load (a non-finite set would be refused).
+  EXPECT_GT(actor.counters().weights_loaded, 0u);
+  for (const auto& e : std::filesystem::directory_iterator(lo.run_dir + "/checkpoints")) {
+    const proto::Checkpoint c = ReadCheckpointFile(e.path().string());
+    for (float p : c.trainer().model().params()) ASSERT_TRUE(std::isfinite(p)) << e.path();
+  }
 }
 
 // Fine-tuning (walk stage 2 from stage 1): a new run takes the policy weights and normalizer of

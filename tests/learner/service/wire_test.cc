@@ -127,6 +127,70 @@ TEST(WireTest, RejectsNonFinite) {
   EXPECT_EQ(ParseBytes(m2.SerializeAsString(), &why), WireReject::kNonFinite);
 }
 
+// Raw-observation statistics of `count` samples (mean 0, var 1 per input).
+void SetStats(proto::ActorMessage* m, double count) {
+  auto* st = m->mutable_segment()->mutable_rollout()->mutable_obs_stats_delta();
+  st->Clear();
+  st->set_count(count);
+  for (int i = 0; i < kObs; ++i) {
+    st->add_mean(0.0);
+    st->add_var(1.0);
+  }
+}
+
+TEST(WireTest, RejectsFiniteButAbsurdValuesBeforeTheyTouchState) {
+  // The attacks of issue 17: a statistics count far beyond what a segment holds (1e308 stopped
+  // training), and finite values of 1e30 (they made the learner publish NaN weights).
+  std::string why;
+  {
+    proto::ActorMessage m = ValidSegment();
+    SetStats(&m, 1e308);
+    EXPECT_EQ(ParseBytes(m.SerializeAsString(), &why), WireReject::kRange);
+    EXPECT_NE(why.find("obs_stats_delta.count"), std::string::npos) << why;
+  }
+  {
+    proto::ActorMessage m = ValidSegment();  // the count of the segment's own steps is fine
+    SetStats(&m, kSteps);
+    EXPECT_EQ(ParseBytes(m.SerializeAsString(), &why), WireReject::kOk) << why;
+  }
+  {
+    proto::ActorMessage m = ValidSegment();
+    m.mutable_segment()->mutable_rollout()->set_rewards(3, 1e30f);
+    EXPECT_EQ(ParseBytes(m.SerializeAsString(), &why), WireReject::kRange);
+    EXPECT_NE(why.find("rewards[3]"), std::string::npos) << why;
+  }
+  {
+    proto::ActorMessage m = ValidSegment();
+    m.mutable_segment()->mutable_rollout()->set_obs(7, -2e6f);
+    EXPECT_EQ(ParseBytes(m.SerializeAsString(), &why), WireReject::kRange);
+  }
+  {
+    proto::ActorMessage m = ValidSegment();
+    SetStats(&m, kSteps);
+    m.mutable_segment()->mutable_rollout()->mutable_obs_stats_delta()->set_var(0, 1e20);
+    EXPECT_EQ(ParseBytes(m.SerializeAsString(), &why), WireReject::kRange);
+  }
+  {
+    proto::ActorMessage m = ValidSegment();
+    proto::EpisodeStats* e = m.mutable_segment()->add_episodes();
+    e->set_length(10);
+    e->set_episode_return(1e300);
+    EXPECT_EQ(ParseBytes(m.SerializeAsString(), &why), WireReject::kRange);
+  }
+  {
+    // The bound is the config's: a tighter one rejects what the default accepts.
+    proto::ActorMessage m = ValidSegment();
+    m.mutable_segment()->mutable_rollout()->set_rewards(0, 50.0f);
+    const std::string bytes = m.SerializeAsString();
+    proto::ActorMessage out;
+    EXPECT_EQ(ParseActorMessage(bytes.data(), bytes.size(), Limits(), &out, &why), WireReject::kOk);
+    WireLimits tight = Limits();
+    tight.max_abs_value = 10.0;
+    EXPECT_EQ(ParseActorMessage(bytes.data(), bytes.size(), tight, &out, &why), WireReject::kRange);
+  }
+  EXPECT_STREQ(WireRejectName(WireReject::kRange), "out_of_range");
+}
+
 TEST(WireTest, LearnerMessageChecks) {
   std::string why;
   proto::LearnerMessage out;
