@@ -143,5 +143,24 @@ TEST_F(CliTest, TrainEndsByItselfAtMaxSamplesWithASummary) {
   EXPECT_LT(samples, 3000 + 4 * 1024);
 }
 
+TEST_F(CliTest, TrainEndsByItselfAtItsSuccessTarget) {
+  // The delivered left turn, fine-tuned on: its training episodes pass the success test most of
+  // the time, so a target of 50% over 4 judged episodes ends the run after a few updates.
+  const std::string dir = ::testing::TempDir() + "perch_cli_target";
+  std::filesystem::remove_all(dir);
+  const int port = 23000 + (getpid() % 2000) * 3;
+  const Result r = Perch(std::string("train --config ") + PERCH_SOURCE_DIR +
+                         "/configs/turn_left_heading4.json --actors 1 --run-dir " + dir +
+                         " --target-success 0.5 --set cluster.target_window=4"
+                         " --set cluster.init_from=models/turn_left/policy.bin"
+                         " --set ppo.steps_per_update=1024 --set ppo.learning_rate=1e-6"
+                         " --rollout-port " + std::to_string(port) + " --weights-port " +
+                         std::to_string(port + 1) + " --metrics-port " + std::to_string(port + 2));
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_TRUE(Has(r.out, "Run ended (target_success)")) << r.out;
+  EXPECT_TRUE(Has(r.out, "over the last 4 judged episodes")) << r.out;  // the summary
+  EXPECT_TRUE(std::filesystem::exists(dir + "/checkpoints")) << r.out;
+}
+
 }  // namespace
 }  // namespace perch
