@@ -39,6 +39,8 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
                   "hold_contact_weight",
                   "hold_seat_weight",
                   "hold_seat_alpha",
+                  "root_pos_weight",
+                  "root_pos_alpha",
                   "energy",
                   "pelvis_end_offset",
                   "clip_seat_height_m",
@@ -72,6 +74,8 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "hold_contact_weight", c.hold_contact_weight, ctx);
   GetOptional(j, "hold_seat_weight", c.hold_seat_weight, ctx);
   GetOptional(j, "hold_seat_alpha", c.hold_seat_alpha, ctx);
+  GetOptional(j, "root_pos_weight", c.root_pos_weight, ctx);
+  GetOptional(j, "root_pos_alpha", c.root_pos_alpha, ctx);
   if (j.contains("energy")) c.energy = EnergyCostConfig::FromJson(j["energy"], ctx + ".energy");
   GetOptional(j, "pelvis_end_offset", c.pelvis_end_offset, ctx);
   GetOptional(j, "clip_seat_height_m", c.clip_seat_height_m, ctx);
@@ -105,7 +109,8 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!(c.eval_episode_s > 0)) throw ConfigError(ctx + ".eval_episode_s: must be > 0");
   if (!(c.max_seat_height_m > 0)) throw ConfigError(ctx + ".max_seat_height_m: must be > 0");
   for (double w : {c.approach_weight, c.hold_pose_weight, c.hold_energy_weight,
-                   c.hold_contact_weight, c.hold_seat_weight, c.hold_seat_alpha}) {
+                   c.hold_contact_weight, c.hold_seat_weight, c.hold_seat_alpha,
+                   c.root_pos_weight, c.root_pos_alpha}) {
     if (!(w >= 0)) throw ConfigError(ctx + ": reward weights must be >= 0");
   }
   for (double v : c.pelvis_end_offset) {
@@ -127,6 +132,8 @@ Json SitTaskConfig::ToJson() const {
               {"hold_contact_weight", hold_contact_weight},
               {"hold_seat_weight", hold_seat_weight},
               {"hold_seat_alpha", hold_seat_alpha},
+              {"root_pos_weight", root_pos_weight},
+              {"root_pos_alpha", root_pos_alpha},
               {"energy", energy.ToJson()},
               {"pelvis_end_offset", pelvis_end_offset},
               {"clip_seat_height_m", clip_seat_height_m},
@@ -240,7 +247,12 @@ TaskStep SitTask::OnStep(const HumanoidChairEnv& env, const float* action) {
     const double d2 = (env.PelvisPosition() - env.SeatTargetWorld()).head<2>().squaredNorm();
     t.seat = c_.hold_seat_weight * std::exp(-c_.hold_seat_alpha * d2);
   }
-  t.total = t.similarity + t.approach + t.energy + t.contact + t.seat;
+  if (c_.root_pos_weight > 0) {
+    const double d2 =
+        (env.humanoid_state().root_pos - ReferenceAt(k).root_pos).head<2>().squaredNorm();
+    t.root_pos = c_.root_pos_weight * std::exp(-c_.root_pos_alpha * d2);
+  }
+  t.total = t.similarity + t.approach + t.energy + t.contact + t.seat + t.root_pos;
   terms_ = t;
   m_.prev_distance = t.seat_distance_m;
   RememberPose(env);

@@ -184,6 +184,39 @@ TEST(SitTask, HoldSeatTermRewardsThePelvisNearTheSeatTargetAfterTheClip) {
   EXPECT_EQ(SitTaskConfig().hold_seat_weight, 0.0);
 }
 
+TEST(SitTask, RootPositionTermTracksThePlacedClipsRootPath) {
+  const double w = 0.3, alpha = 100.0;
+  auto plain = MakeSitEnv(Json{{"reference_state_init", false}});
+  auto track = MakeSitEnv(Json{{"reference_state_init", false},
+                               {"root_pos_weight", w},
+                               {"root_pos_alpha", alpha}});
+  std::vector<float> obs(57), next(57), zero(21, 0.0f);
+  for (auto* e : {plain.get(), track.get()}) {
+    e->Seed(5);
+    e->Reset(obs.data());
+  }
+  double first = -1, last = -1;
+  for (int k = 1; k <= 40; ++k) {
+    const StepResult a = plain->Step(zero.data(), next.data());
+    const StepResult b = track->Step(zero.data(), next.data());
+    if (a.terminated || b.terminated) break;
+    const double d2 = (track->humanoid_state().root_pos - TaskOf(*track).ReferenceAt(k).root_pos)
+                          .head<2>()
+                          .squaredNorm();
+    const double want = w * std::exp(-alpha * d2);
+    EXPECT_NEAR(TaskOf(*track).last_terms().root_pos, want, 1e-9) << k;
+    EXPECT_NEAR(b.reward - a.reward, want, 1e-5) << k;
+    if (first < 0) first = want;
+    last = want;
+  }
+  // At the start the humanoid stands on the clip's first frame: the term pays nearly its weight;
+  // zero torques leave the clip's path, and it pays less.
+  EXPECT_GT(first, 0.9 * w);
+  EXPECT_LT(last, first);
+  EXPECT_EQ(SitTaskConfig().root_pos_weight, 0.0);
+  EXPECT_THROW(MakeSitEnv(Json{{"root_pos_weight", -1.0}}), ConfigError);
+}
+
 TEST(SitTask, TerminatesBelowItsOwnRootHeight) {
   // The start (root about 1.28 m) is above both thresholds; a threshold above it ends at once.
   std::vector<float> obs(57), next(57), zero(21, 0.0f);
