@@ -83,9 +83,11 @@ struct LearnerFlags {
   double target_success = 0.0;
   std::string run_dir;
   bool resume = false;
-  std::string rollout_bind = "tcp://*:5555";
-  std::string weights_bind = "tcp://*:5556";
+  // Loopback unless told otherwise (a cluster binds all interfaces explicitly, k8s/learner.yaml).
+  std::string rollout_bind = "tcp://127.0.0.1:5555";
+  std::string weights_bind = "tcp://127.0.0.1:5556";
   int metrics_port = 9100;
+  std::string metrics_bind = "127.0.0.1";
   int64_t max_updates = 0;
   bool check_config = false;
 };
@@ -111,6 +113,7 @@ int RunLearner(const LearnerFlags& f) {
   o.rollout_bind = f.rollout_bind;
   o.weights_bind = f.weights_bind;
   o.metrics_port = f.metrics_port;
+  o.metrics_bind = f.metrics_bind;
   o.run_dir = f.run_dir;
   o.resume = f.resume;
   o.max_updates = f.max_updates;
@@ -820,6 +823,8 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   l->add_option("--rollout-bind", lf->rollout_bind, "ZeroMQ endpoint for rollouts (PULL)");
   l->add_option("--weights-bind", lf->weights_bind, "ZeroMQ endpoint for weights (XPUB)");
   l->add_option("--metrics-port", lf->metrics_port, "Prometheus /metrics port (0: any free)");
+  l->add_option("--metrics-bind", lf->metrics_bind,
+                "address /metrics listens on (0.0.0.0: every interface, for a scraper)");
   l->add_option("--max-updates", lf->max_updates, "stop after this many updates (0: never)");
   l->add_option("--set", lf->sets, "override a config field: section.field=VALUE (repeatable)");
   l->add_option("--max-samples", lf->max_samples,

@@ -142,7 +142,9 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
   weights_sock_.set(zmq::sockopt::linger, 0);
   rollout_sock_.bind(options_.rollout_bind);
   weights_sock_.bind(options_.weights_bind);
-  if (options_.metrics_port >= 0) metrics_ = std::make_unique<MetricsServer>(options_.metrics_port);
+  if (options_.metrics_port >= 0) {
+    metrics_ = std::make_unique<MetricsServer>(options_.metrics_port, options_.metrics_bind);
+  }
   spdlog::info(
       "learner: task {} obs_dim {} action_size {} batch {} samples; rollouts on {}, "
       "weights on {}, metrics on {}",
@@ -562,8 +564,17 @@ void LearnerService::Run() {
       while (weights_sock_.recv(sub, zmq::recv_flags::dontwait)) {
         any_subscribe |= sub.size() > 0 && static_cast<const char*>(sub.data())[0] == 1;
       }
-      // A late joiner or a reconnecting actor gets the current weights now, not at the next update.
-      if (any_subscribe) Publish(true);
+      // A late joiner or a reconnecting actor gets the current weights now, not at the next
+      // update; subscriptions within republish_min_interval_s share one resend.
+      republish_pending_ |= any_subscribe;
+    }
+    if (republish_pending_) {
+      const double now = MonotonicSeconds();
+      if (now - last_republish_s_ >= options_.republish_min_interval_s) {
+        Publish(true);
+        last_republish_s_ = now;
+        republish_pending_ = false;
+      }
     }
     if (items[0].revents & ZMQ_POLLIN) {
       zmq::message_t msg;

@@ -38,9 +38,14 @@ struct LearnerSetup {
 };
 
 struct LearnerOptions {
-  std::string rollout_bind = "tcp://*:5555";
-  std::string weights_bind = "tcp://*:5556";
+  // Loopback by default: a cluster binds all interfaces explicitly (k8s/learner.yaml).
+  std::string rollout_bind = "tcp://127.0.0.1:5555";
+  std::string weights_bind = "tcp://127.0.0.1:5556";
   int metrics_port = 9100;  // -1: no /metrics endpoint; 0: any free port
+  std::string metrics_bind = "127.0.0.1";
+  // Weights resent to (re)subscribing actors at most this often; a flood of subscriptions costs
+  // one resend per interval (issue 17). 0: every subscription.
+  double republish_min_interval_s = 0.2;
   std::string run_dir;
   bool resume = false;
   int64_t max_updates = 0;  // stop after this many updates in total (0: never)
@@ -128,6 +133,8 @@ class LearnerService {
   uint64_t rejects_unlogged_ = 0;
   double start_s_ = 0.0;
   double last_update_s_ = 0.0;
+  double last_republish_s_ = -1e9;
+  bool republish_pending_ = false;
   double train_time_base_s_ = 0.0;
   int64_t last_checkpoint_update_ = -1;
   std::string last_checkpoint_path_;

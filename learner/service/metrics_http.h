@@ -13,9 +13,10 @@ namespace perch {
 
 class MetricsServer {
  public:
-  // Binds 0.0.0.0:port (port 0: an ephemeral port, see port()). Throws std::runtime_error naming
-  // the port when it cannot bind.
-  explicit MetricsServer(int port);
+  // Binds address:port (default loopback; "0.0.0.0" for a pod that Prometheus scrapes; port 0:
+  // an ephemeral port, see port()). Throws std::runtime_error naming the port or address when it
+  // cannot bind.
+  explicit MetricsServer(int port, const std::string& address = "127.0.0.1");
   ~MetricsServer();
   MetricsServer(const MetricsServer&) = delete;
   MetricsServer& operator=(const MetricsServer&) = delete;

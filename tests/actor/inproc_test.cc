@@ -170,6 +170,34 @@ TEST(InprocTest, AnUpdateThatLeavesNonFiniteWeightsIsDiscarded) {
   }
 }
 
+TEST(InprocTest, ASubscriptionFloodCostsOneWeightResendPerInterval) {
+  // Thousands of (re)subscriptions in about a second: the learner resends its weights at most
+  // every republish_min_interval_s (0.2 s), not once per subscription (issue 17).
+  const ExperimentConfig cfg = ExperimentConfigFromJson(MockConfig(), "flood");
+  LearnerOptions lo = InprocOptions("flood", TempDir("flood") + "/run");
+  std::atomic<bool> stop{false};
+  lo.stop = &stop;
+  zmq::context_t ctx(1);
+  LearnerService learner(ctx, MakeLearnerSetup(cfg), lo);
+  std::thread run([&] { learner.Run(); });
+  zmq::socket_t sub(ctx, zmq::socket_type::sub);
+  sub.connect(lo.weights_bind);
+  const auto t0 = std::chrono::steady_clock::now();
+  int subscriptions = 0;
+  while (std::chrono::steady_clock::now() - t0 < std::chrono::milliseconds(1000)) {
+    sub.set(zmq::sockopt::subscribe, "");
+    sub.set(zmq::sockopt::unsubscribe, "");
+    ++subscriptions;
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));
+  stop = true;
+  run.join();
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_GT(subscriptions, 1000);
+  EXPECT_GE(learner.stats().weights_republished, 1u);  // subscribers still get the weights
+  EXPECT_LE(static_cast<double>(learner.stats().weights_republished), seconds / 0.2 + 2) << subscriptions;
+}
+
 // Fine-tuning (walk stage 2 from stage 1): a new run takes the policy weights and normalizer of
 // another run's checkpoint, and counts its own updates from 0 with a fresh optimizer.
 TEST(InprocTest, NewRunStartsFromInitFromCheckpointWeights) {

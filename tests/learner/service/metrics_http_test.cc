@@ -1,6 +1,11 @@
 #include "learner/service/metrics_http.h"
 
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <ifaddrs.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <string>
 
@@ -22,6 +27,43 @@ TEST(MetricsHttpTest, ServesTextExposition) {
   EXPECT_NE(HttpGetLocal(server.port(), "/metrics").find("perch_updates_total 13\n"),
             std::string::npos);
   EXPECT_THROW(HttpGetLocal(server.port(), "/other"), std::runtime_error);  // 404
+}
+
+// A non-loopback IPv4 address of this machine, or "" when it has none.
+std::string NonLoopbackAddress() {
+  ifaddrs* list = nullptr;
+  if (::getifaddrs(&list) != 0) return "";
+  std::string found;
+  for (ifaddrs* a = list; a != nullptr && found.empty(); a = a->ifa_next) {
+    if (a->ifa_addr == nullptr || a->ifa_addr->sa_family != AF_INET) continue;
+    char buf[INET_ADDRSTRLEN] = {0};
+    ::inet_ntop(AF_INET, &reinterpret_cast<sockaddr_in*>(a->ifa_addr)->sin_addr, buf, sizeof(buf));
+    if (std::string(buf).rfind("127.", 0) != 0) found = buf;
+  }
+  ::freeifaddrs(list);
+  return found;
+}
+
+bool Connects(const std::string& address, int port) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_port = htons(static_cast<uint16_t>(port));
+  ::inet_pton(AF_INET, address.c_str(), &addr.sin_addr);
+  const bool ok = ::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) == 0;
+  ::close(fd);
+  return ok;
+}
+
+TEST(MetricsHttpTest, ListensOnLoopbackUnlessToldOtherwise) {
+  MetricsServer local(0);
+  EXPECT_TRUE(Connects("127.0.0.1", local.port()));
+  EXPECT_THROW(MetricsServer bad(0, "not-an-address"), std::runtime_error);
+  const std::string other = NonLoopbackAddress();
+  if (other.empty()) GTEST_SKIP() << "no non-loopback interface to try from";
+  EXPECT_FALSE(Connects(other, local.port())) << other;
+  MetricsServer everywhere(0, "0.0.0.0");
+  EXPECT_TRUE(Connects(other, everywhere.port())) << other;
 }
 
 TEST(MetricsHttpTest, SecondServerOnSamePortFails) {
