@@ -143,6 +143,11 @@ class TurnMetrics : public EpisodeMetrics {
   }
   void Observe(const HumanoidChairEnv& env, const StepResult& r) override {
     const TurnTask& t = Task(env);
+    if (r.terminated) {
+      // Which early-termination rule ended it: the root height (a fall) or the yaw rule.
+      const bool low = env.humanoid_state().root_pos.z() < t.config().min_root_z;
+      (low ? ended_low_ : ended_yaw_) += 1;
+    }
     if (judged_ || env.episode_step() < t.SuccessStep()) return;
     judged_ = true;
     const double err_deg = std::abs(t.last_terms().yaw_error_rad) * 180.0 / M_PI;
@@ -160,6 +165,7 @@ class TurnMetrics : public EpisodeMetrics {
     (*j)["final_yaw_error_deg_mean"] = MeanOf(yaw_err_deg_);
     (*j)["final_yaw_error_deg_p90"] = Percentile(yaw_err_deg_, 0.9);
     (*j)["episodes_fell_before_judging"] = unjudged_;
+    (*j)["terminations_by_rule"] = Json{{"root_height", ended_low_}, {"yaw", ended_yaw_}};
   }
 
  private:
@@ -168,6 +174,7 @@ class TurnMetrics : public EpisodeMetrics {
   }
   bool judged_ = false, ok_ = false;
   int unjudged_ = 0;
+  int ended_low_ = 0, ended_yaw_ = 0;  // early terminations by rule, over all episodes
   std::vector<double> yaw_err_deg_;
 };
 

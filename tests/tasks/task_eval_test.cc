@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <string>
+
 #include "learner/ppo.h"
 #include "tasks/registry.h"
 
@@ -67,6 +70,12 @@ TEST(TaskEval, UntrainedPoliciesNeitherTurnNorSit) {
         GetTask(name, "t").evaluate(c, Untrained(ObsLayoutDim(c.env.obs_layout), 1), o, nullptr);
     EXPECT_EQ(j["success_rate"].get<double>(), 0.0);
     EXPECT_GT(j["fall_rate"].get<double>(), 0.0);
+    if (std::string(name) == "turn_left") {
+      // Every early termination is attributed to exactly one rule.
+      const Json& by = j["terminations_by_rule"];
+      EXPECT_EQ(by["root_height"].get<int>() + by["yaw"].get<int>(),
+                static_cast<int>(std::lround(j["fall_rate"].get<double>() * o.episodes)));
+    }
   }
 }
 
