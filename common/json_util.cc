@@ -5,6 +5,7 @@
 
 #include <cstdio>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 namespace perch {
@@ -14,8 +15,21 @@ Json LoadJsonFile(const std::string& path) {
   if (!in) throw ConfigError(path + ": cannot open file");
   std::stringstream ss;
   ss << in.rdbuf();
+  // Keys seen so far in each object being parsed, innermost last.
+  std::vector<std::set<std::string>> keys;
+  const Json::parser_callback_t no_duplicates = [&](int, Json::parse_event_t ev, Json& parsed) {
+    if (ev == Json::parse_event_t::object_start) {
+      keys.emplace_back();
+    } else if (ev == Json::parse_event_t::object_end) {
+      if (!keys.empty()) keys.pop_back();
+    } else if (ev == Json::parse_event_t::key && !keys.empty()) {
+      const std::string k = parsed.get<std::string>();
+      if (!keys.back().insert(k).second) throw ConfigError(path + ": duplicate key \"" + k + "\"");
+    }
+    return true;
+  };
   try {
-    return Json::parse(ss.str());
+    return Json::parse(ss.str(), no_duplicates);
   } catch (const nlohmann::json::parse_error& e) {
     throw ConfigError(path + ": malformed JSON: " + e.what());
   }
