@@ -67,20 +67,37 @@ uint32_t HostnameHash() {
 }
 
 // ---- perch learner ----
-// --max-samples / --target-success are shorthands for --set cluster.max_samples=N and
-// --set cluster.target_success=R.
-std::vector<std::string> SetsWithShorthands(std::vector<std::string> sets, int64_t max_samples,
-                                            double target_success) {
-  if (max_samples > 0) sets.push_back("cluster.max_samples=" + std::to_string(max_samples));
-  if (target_success > 0) sets.push_back("cluster.target_success=" + fmt::format("{}", target_success));
-  return sets;
-}
-
-struct LearnerFlags {
-  std::string config;
+// Config overrides shared by perch learner and perch train: --set, and --max-samples /
+// --target-success as shorthands for --set cluster.max_samples=N / cluster.target_success=R.
+struct OverrideFlags {
   std::vector<std::string> sets;
   int64_t max_samples = 0;
   double target_success = 0.0;
+
+  void Register(CLI::App* app) {
+    app->add_option("--set", sets, "override a config field: section.field=VALUE (repeatable)");
+    app->add_option("--max-samples", max_samples,
+                    "end the run after this many samples (cluster.max_samples; 0: the config's)");
+    app->add_option("--target-success", target_success,
+                    "end the run at this success rate over cluster.target_window judged episodes "
+                    "(cluster.target_success; 0: the config's)");
+  }
+  // The --set list with the shorthands appended; ConfigError names a bad shorthand.
+  std::vector<std::string> All() const {
+    if (max_samples < 0) throw ConfigError("--max-samples: must be >= 0");
+    if (!(target_success >= 0 && target_success <= 1)) {
+      throw ConfigError("--target-success: must be in [0, 1]");
+    }
+    std::vector<std::string> all = sets;
+    if (max_samples > 0) all.push_back("cluster.max_samples=" + std::to_string(max_samples));
+    if (target_success > 0) all.push_back("cluster.target_success=" + fmt::format("{}", target_success));
+    return all;
+  }
+};
+
+struct LearnerFlags {
+  std::string config;
+  OverrideFlags overrides;
   std::string run_dir;
   bool resume = false;
   // Loopback unless told otherwise (a cluster binds all interfaces explicitly, k8s/learner.yaml).
@@ -98,10 +115,7 @@ int RunLearner(const LearnerFlags& f) {
   if (f.metrics_port != 0) CheckPort(f.metrics_port, "--metrics-port");
   if (f.max_updates < 0) throw ConfigError("--max-updates: must be >= 0");
   if (f.run_dir.empty()) throw ConfigError("--run-dir: required");
-  if (f.max_samples < 0) throw ConfigError("--max-samples: must be >= 0");
-  if (!(f.target_success >= 0 && f.target_success <= 1)) throw ConfigError("--target-success: must be in [0, 1]");
-  const ExperimentConfig cfg =
-      LoadExperimentConfig(f.config, SetsWithShorthands(f.sets, f.max_samples, f.target_success));
+  const ExperimentConfig cfg = LoadExperimentConfig(f.config, f.overrides.All());
   const LearnerSetup setup = MakeLearnerSetup(cfg);
   if (f.check_config) {
     std::cerr << "perch learner: config " << f.config << " and flags OK\n";
@@ -182,9 +196,7 @@ int RunActor(const ActorFlags& f) {
 // ---- perch train ----
 struct TrainFlags {
   std::string config;
-  std::vector<std::string> sets;
-  int64_t max_samples = 0;
-  double target_success = 0.0;
+  OverrideFlags overrides;
   int actors = 2;
   int envs = 0;
   std::string run_dir;
@@ -204,7 +216,7 @@ std::vector<std::string> LearnerArgv(const TrainFlags& f, bool resume) {
       "--weights-bind", "tcp://127.0.0.1:" + std::to_string(f.weights_port),
       "--metrics-port", std::to_string(f.metrics_port)};
   if (resume) a.push_back("--resume");
-  for (const std::string& s : SetsWithShorthands(f.sets, f.max_samples, f.target_success)) {
+  for (const std::string& s : f.overrides.All()) {
     a.push_back("--set");
     a.push_back(s);
   }
@@ -223,7 +235,7 @@ std::vector<std::string> ActorArgv(const TrainFlags& f, int id) {
                                 "--weights-port", std::to_string(f.weights_port),
                                 "--actor-id",     std::to_string(id)};
   // The actors build the same env as the learner: the same overrides.
-  for (const std::string& s : f.sets) {
+  for (const std::string& s : f.overrides.sets) {
     a.push_back("--set");
     a.push_back(s);
   }
@@ -239,10 +251,7 @@ int RunTrain(TrainFlags f) {
   CheckPort(f.rollout_port, "--rollout-port");
   CheckPort(f.weights_port, "--weights-port");
   CheckPort(f.metrics_port, "--metrics-port");
-  if (f.max_samples < 0) throw ConfigError("--max-samples: must be >= 0");
-  if (!(f.target_success >= 0 && f.target_success <= 1)) throw ConfigError("--target-success: must be in [0, 1]");
-  const ExperimentConfig cfg =
-      LoadExperimentConfig(f.config, SetsWithShorthands(f.sets, f.max_samples, f.target_success));
+  const ExperimentConfig cfg = LoadExperimentConfig(f.config, f.overrides.All());
   if (f.run_dir.empty()) {
     std::string base = f.config.substr(f.config.rfind('/') + 1);
     base = base.substr(0, base.rfind('.'));
@@ -826,12 +835,7 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   l->add_option("--metrics-bind", lf->metrics_bind,
                 "address /metrics listens on (0.0.0.0: every interface, for a scraper)");
   l->add_option("--max-updates", lf->max_updates, "stop after this many updates (0: never)");
-  l->add_option("--set", lf->sets, "override a config field: section.field=VALUE (repeatable)");
-  l->add_option("--max-samples", lf->max_samples,
-                "end the run after this many samples (cluster.max_samples; 0: the config's)");
-  l->add_option("--target-success", lf->target_success,
-                "end the run at this success rate over cluster.target_window judged episodes "
-                "(cluster.target_success; 0: the config's)");
+  lf->overrides.Register(l);
   l->add_flag("--check-config", lf->check_config, "validate config and flags, then exit");
   l->callback([lf] {
     const int rc = RunLearner(*lf);
@@ -865,12 +869,7 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   t->add_option("--run-dir", tf->run_dir, "run directory (default: runs/<config name>)");
   t->add_flag("--resume", tf->resume, "continue the run in --run-dir");
   t->add_option("--max-updates", tf->max_updates, "stop after this many updates (0: never)");
-  t->add_option("--set", tf->sets, "override a config field: section.field=VALUE (repeatable)");
-  t->add_option("--max-samples", tf->max_samples,
-                "end the run after this many samples (cluster.max_samples; 0: the config's)");
-  t->add_option("--target-success", tf->target_success,
-                "end the run at this success rate over cluster.target_window judged episodes "
-                "(cluster.target_success; 0: the config's)");
+  tf->overrides.Register(t);
   t->add_option("--rollout-port", tf->rollout_port, "loopback rollout port");
   t->add_option("--weights-port", tf->weights_port, "loopback weights port");
   t->add_option("--metrics-port", tf->metrics_port, "Prometheus /metrics port");

@@ -3,33 +3,21 @@
 // reports the spread of its repeats; `perch bench profile` splits a control step into phases that
 // add up.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <cstdio>
 #include <cstdlib>
 #include <string>
 
 #include "common/json_util.h"
+#include "tests/common/run_perch.h"
 
 namespace perch {
 namespace {
 
-struct Result {
-  int code;
-  std::string out;
-};
+using Result = testing_util::PerchResult;
 
-Result RunPerch(const std::string& args) {
-  const std::string cmd = std::string(std::getenv("PERCH_BIN")) + " " + args + " 2>/dev/null";
-  FILE* p = popen(cmd.c_str(), "r");
-  if (p == nullptr) return {-1, ""};
-  std::string out;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) out.append(buf, n);
-  const int status = pclose(p);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
+// The benchmarks print their JSON on stdout; progress on stderr is dropped.
+Result RunPerch(const std::string& args) { return testing_util::RunPerch(args + " 2>/dev/null"); }
 
 std::string Config(const char* name) { return std::string(PERCH_SOURCE_DIR) + "/configs/" + name; }
 

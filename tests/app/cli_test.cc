@@ -2,7 +2,7 @@
 // nearest valid name, help shows defaults, --data-dir and `perch version` say where data comes
 // from, and a mock training run ends by itself at --max-samples with its summary.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
+#include <unistd.h>
 
 #include <cstdio>
 #include <cstdlib>
@@ -11,26 +11,16 @@
 #include <string>
 
 #include "common/json_util.h"
+#include "tests/common/run_perch.h"
 
 namespace perch {
 namespace {
 
-struct Result {
-  int code;
-  std::string out;  // stdout and stderr
-};
+using Result = testing_util::PerchResult;
 
+// stdout and stderr together (the messages under test go to stderr), or stdout alone.
 Result Perch(const std::string& args, bool with_stderr = true) {
-  const std::string cmd =
-      std::string(std::getenv("PERCH_BIN")) + " " + args + (with_stderr ? " 2>&1" : " 2>/dev/null");
-  FILE* p = popen(cmd.c_str(), "r");
-  if (p == nullptr) return {-1, ""};
-  std::string out;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) out.append(buf, n);
-  const int status = pclose(p);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+  return testing_util::RunPerch(args + (with_stderr ? " 2>&1" : " 2>/dev/null"));
 }
 
 bool Has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }

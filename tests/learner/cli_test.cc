@@ -1,7 +1,6 @@
 // The perch subcommands of the learner, as a user runs them: `perch bench ppo --json` prints one
 // JSON object; `perch ppo toy` writes its resolved config and refuses a bad one (exit 2).
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cstdio>
@@ -11,28 +10,13 @@
 #include <string>
 
 #include "common/json_util.h"
+#include "tests/common/run_perch.h"
 
 namespace perch {
 namespace {
 
-struct Result {
-  int code;
-  std::string out;
-};
-
-Result RunPerch(const std::string& args) {
-  const char* bin = std::getenv("PERCH_BIN");
-  if (bin == nullptr) return {-1, ""};
-  const std::string cmd = std::string(bin) + " " + args;
-  FILE* p = popen(cmd.c_str(), "r");
-  if (p == nullptr) return {-1, ""};
-  std::string out;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) out.append(buf, n);
-  const int status = pclose(p);
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
+using Result = testing_util::PerchResult;
+using testing_util::RunPerch;
 
 class CliTest : public ::testing::Test {
  protected:
