@@ -10,6 +10,7 @@
 #include "common/config_file.h"
 #include "common/json_util.h"
 #include "common/paths.h"
+#include "learner/dense_kernels.h"
 #include "tasks/recording.h"
 
 namespace perch {
@@ -23,12 +24,15 @@ void RegisterInfoCommands(CLI::App& root, CLI::App& /*bench*/) {
     const Json j{{"version", PerchVersion()},
                  {"executable", ExecutablePath()},
                  {"data_root", d.root},
-                 {"data_origin", d.origin}};
+                 {"data_origin", d.origin},
+                 // The MLP kernels the learner uses on this CPU (PERCH_SIMD forces one).
+                 {"simd", ActiveDenseKernels().name}};
     if (*json) {
       std::cout << j.dump() << "\n";
     } else {
       std::cout << "perch " << PerchVersion() << "\nexecutable: " << ExecutablePath()
-                << "\ndata: " << d.root << " (" << d.origin << ")\n";
+                << "\ndata: " << d.root << " (" << d.origin << ")\nsimd: "
+                << ActiveDenseKernels().name << "\n";
     }
   });
 

@@ -17,6 +17,7 @@
 #include "app/commands.h"
 #include "common/json_util.h"
 #include "common/proto/model.pb.h"
+#include "learner/dense_kernels.h"
 #include "learner/policy.h"
 #include "learner/ppo.h"
 #include "learner/rollout.h"
@@ -47,13 +48,17 @@ struct BenchOptions {
   int batch = 8192;
   int minibatches = 32;
   int repeats = 10;
+  int threads = 1;
   uint64_t seed = 0;
   bool json = false;
 };
 
+// One timed PPO epoch per Update call; with --threads N > 1 a one-thread learner is timed in the
+// same run, alternating epoch by epoch, and the JSON gives the ratio (machines here are noisy).
 void RunBench(const BenchOptions& o) {
-  if (o.obs_dim <= 0 || o.batch <= 0 || o.minibatches <= 0 || o.repeats <= 0) {
-    throw ConfigError("bench ppo: --obs-dim, --batch, --minibatches and --repeats must be > 0");
+  if (o.obs_dim <= 0 || o.batch <= 0 || o.minibatches <= 0 || o.repeats <= 0 || o.threads <= 0) {
+    throw ConfigError(
+        "bench ppo: --obs-dim, --batch, --minibatches, --repeats and --threads must be > 0");
   }
   Eigen::setNbThreads(1);
   const PolicyConfig pc = PolicyConfig::Subtask(o.obs_dim);
@@ -61,7 +66,10 @@ void RunBench(const BenchOptions& o) {
   cfg.steps_per_update = o.batch;
   cfg.num_minibatches = o.minibatches;
   cfg.num_epochs = 1;  // one timed epoch per Update call
+  PpoConfig cfg_n = cfg;
+  cfg_n.threads = o.threads;
   PpoLearner learner(pc, cfg, o.seed);
+  PpoLearner learner_n(pc, cfg_n, o.seed);
 
   // A batch with realistic log-probs: actions sampled by the policy on random observations.
   PolicyRunner runner(pc, cfg.obs_norm);
@@ -83,12 +91,18 @@ void RunBench(const BenchOptions& o) {
   r.obs_stats_delta = RunningMeanStd(pc.obs_dim, 0.0);
   const std::vector<Rollout> batch{r};
 
-  learner.Update(batch);  // warm-up: buffers reach their size
-  std::vector<double> times;
+  const bool compare = o.threads > 1;
+  learner.Update(batch);  // warm-up: buffers reach their size, threads start
+  if (compare) learner_n.Update(batch);
+  std::vector<double> times, times_n;
   for (int i = 0; i < o.repeats; ++i) {
-    const auto t0 = Clock::now();
+    auto t0 = Clock::now();
     learner.Update(batch);
     times.push_back(Seconds(t0, Clock::now()));
+    if (!compare) continue;
+    t0 = Clock::now();
+    learner_n.Update(batch);
+    times_n.push_back(Seconds(t0, Clock::now()));
   }
   const double med = Median(times);
   const double best = *std::min_element(times.begin(), times.end());
@@ -108,14 +122,32 @@ void RunBench(const BenchOptions& o) {
          {"threads", 1},
          {"act_steps_per_s", o.batch / act_s},
          {"eigen_simd", Eigen::SimdInstructionSetsInUse()},
+         {"dense_kernels", ActiveDenseKernels().name},
          {"impl", "eigen"}};
+  if (compare) {
+    const double med_n = Median(times_n);
+    j["threads_n"] = o.threads;
+    j["samples_per_s_threads_n"] = o.batch / med_n;
+    j["epoch_ms_median_threads_n"] = 1e3 * med_n;
+    // Per repeat, one thread's time over N threads' (adjacent epochs share the machine's load).
+    std::vector<double> ratios;
+    for (size_t i = 0; i < times.size(); ++i) ratios.push_back(times[i] / times_n[i]);
+    j["speedup_threads_n"] = Median(ratios);
+    j["speedup_threads_n_min"] = *std::min_element(ratios.begin(), ratios.end());
+    j["speedup_threads_n_max"] = *std::max_element(ratios.begin(), ratios.end());
+  }
   if (o.json) {
     std::cout << j.dump() << std::endl;
   } else {
     std::cout << "PPO epoch on " << o.batch << " samples (obs " << pc.obs_dim << ", act "
-              << pc.act_dim << ", 2x64 tanh): " << j["samples_per_s"].get<double>()
-              << " samples/s (median of " << o.repeats << "), actor step "
-              << j["act_steps_per_s"].get<double>() << " steps/s\n";
+              << pc.act_dim << ", 2x64 tanh, " << ActiveDenseKernels().name
+              << " kernels): " << j["samples_per_s"].get<double>() << " samples/s (median of "
+              << o.repeats << "), actor step " << j["act_steps_per_s"].get<double>()
+              << " steps/s\n";
+    if (compare) {
+      std::cout << o.threads << " threads: " << j["samples_per_s_threads_n"].get<double>()
+                << " samples/s, " << j["speedup_threads_n"].get<double>() << "x one thread\n";
+    }
   }
 }
 
@@ -246,12 +278,14 @@ Json RunToy(const ToyOptions& o) {
 
 void RegisterLearnerCommands(CLI::App& root, CLI::App& bench) {
   auto bo = std::make_shared<BenchOptions>();
-  CLI::App* b = bench.add_subcommand("ppo", "PPO update throughput (Eigen, one core)");
+  CLI::App* b = bench.add_subcommand("ppo", "PPO update throughput (Eigen; one core, or --threads)");
   b->add_option("--obs-dim", bo->obs_dim, "observation size (57 sit/meta, 52 walk/turn)");
   b->add_option("--batch", bo->batch, "samples per update (Table 2: 8192)");
   b->add_option("--minibatches", bo->minibatches, "minibatches per epoch (Table 2: 32)");
   b->add_option("--repeats", bo->repeats, "timed epochs");
   b->add_option("--seed", bo->seed, "seed");
+  b->add_option("--threads", bo->threads,
+                "PPO threads (ppo.threads); > 1 also times one thread and reports the speedup");
   b->add_flag("--json", bo->json, "print one JSON object");
   b->callback([bo] {
     UseStderrLogger();

@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "learner/dense_kernels.h"
+
 namespace perch {
 
 std::string ActivationName(Activation a) { return a == Activation::kTanh ? "tanh" : "relu"; }
@@ -98,6 +100,10 @@ Eigen::MatrixXd Orthogonal(int rows, int cols, float gain, Rng& rng) {
   return q.transpose();
 }
 
+DenseAct DenseActOf(Activation a) {
+  return a == Activation::kTanh ? DenseAct::kTanh : DenseAct::kRelu;
+}
+
 }  // namespace
 
 void Mlp::Init(float* params, Rng& rng, float hidden_gain, float out_gain, bool init_hidden,
@@ -123,50 +129,39 @@ void Mlp::Init(float* params, Rng& rng, float hidden_gain, float out_gain, bool 
 void Mlp::Forward(const float* params, const Eigen::Ref<const MatrixXf>& x, MlpCache* cache) const {
   const int n_layers = num_layers();
   const Eigen::Index batch = x.cols();
+  const DenseKernels& k = ActiveDenseKernels();
   cache->act.resize(n_layers + 1);
   cache->act[0] = x;
   for (int l = 0; l < n_layers; ++l) {
-    Eigen::Map<const MatrixXf> w(params + w_offset_[l], sizes_[l + 1], sizes_[l]);
-    Eigen::Map<const VectorXf> b(params + b_offset_[l], sizes_[l + 1]);
     MatrixXf& out = cache->act[l + 1];
     out.resize(sizes_[l + 1], batch);
-    out.noalias() = w * cache->act[l];
-    out.colwise() += b;
-    if (l + 1 < n_layers) {
-      if (activation_ == Activation::kTanh) {
-        out.array() = out.array().tanh();
-      } else {
-        out.array() = out.array().max(0.0f);
-      }
-    }
+    k.forward(params + w_offset_[l], params + b_offset_[l], sizes_[l + 1], sizes_[l],
+              cache->act[l].data(), static_cast<int>(batch), out.data(),
+              l + 1 < n_layers ? DenseActOf(activation_) : DenseAct::kNone);
   }
 }
 
 void Mlp::Backward(const float* params, const Eigen::Ref<const MatrixXf>& grad_out, MlpCache* cache,
                    float* grad_params, MatrixXf* grad_in) const {
   const int n_layers = num_layers();
+  const DenseKernels& k = ActiveDenseKernels();
   cache->grad.resize(n_layers);
   cache->grad[n_layers - 1] = grad_out;
   for (int l = n_layers - 1; l >= 0; --l) {
     const MatrixXf& g = cache->grad[l];  // dL/d(pre-activation of layer l) [out x B]
     const MatrixXf& in = cache->act[l];
-    Eigen::Map<const MatrixXf> w(params + w_offset_[l], sizes_[l + 1], sizes_[l]);
-    Eigen::Map<MatrixXf> dw(grad_params + w_offset_[l], sizes_[l + 1], sizes_[l]);
-    Eigen::Map<VectorXf> db(grad_params + b_offset_[l], sizes_[l + 1]);
-    dw.noalias() += g * in.transpose();
-    db.noalias() += g.rowwise().sum();
+    const int batch = static_cast<int>(g.cols());
+    float* gin = nullptr;
     if (l > 0) {
-      MatrixXf& gp = cache->grad[l - 1];
-      gp.resize(sizes_[l], g.cols());
-      gp.noalias() = w.transpose() * g;
-      if (activation_ == Activation::kTanh) {
-        gp.array() *= 1.0f - in.array().square();
-      } else {
-        gp.array() *= (in.array() > 0.0f).cast<float>();
-      }
+      cache->grad[l - 1].resize(sizes_[l], batch);
+      gin = cache->grad[l - 1].data();
     } else if (grad_in != nullptr) {
-      grad_in->noalias() = w.transpose() * g;
+      grad_in->resize(sizes_[0], batch);
+      gin = grad_in->data();
     }
+    k.backward(params + w_offset_[l], sizes_[l + 1], sizes_[l], in.data(), batch, g.data(),
+               grad_params + w_offset_[l], grad_params + b_offset_[l], gin,
+               l > 0 ? DenseActOf(activation_) : DenseAct::kNone);
   }
 }
 

@@ -7,6 +7,12 @@
 
 namespace perch {
 
+namespace {
+// A minibatch is split across threads only into parts at least this big: smaller ones cost more
+// in hand-off than they save.
+constexpr int kMinShardSamples = 16;
+}  // namespace
+
 PpoConfig PpoConfig::Subtask() { return PpoConfig(); }
 
 PpoConfig PpoConfig::Meta() {
@@ -37,6 +43,7 @@ Json ToJson(const PpoConfig& c) {
               {"normalize_advantages", c.normalize_advantages},
               {"advantage_eps", c.advantage_eps},
               {"bootstrap_on_truncation", c.bootstrap_on_truncation},
+              {"threads", c.threads},
               {"obs_norm", ToJson(c.obs_norm)},
               {"reward_scaling", ToJson(c.reward_scaling)}};
 }
@@ -62,6 +69,7 @@ PpoConfig PpoConfigFromJson(const Json& j, const std::string& ctx) {
                   "normalize_advantages",
                   "advantage_eps",
                   "bootstrap_on_truncation",
+                  "threads",
                   "obs_norm",
                   "reward_scaling"},
                  ctx);
@@ -84,6 +92,7 @@ PpoConfig PpoConfigFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "normalize_advantages", c.normalize_advantages, ctx);
   GetOptional(j, "advantage_eps", c.advantage_eps, ctx);
   GetOptional(j, "bootstrap_on_truncation", c.bootstrap_on_truncation, ctx);
+  GetOptional(j, "threads", c.threads, ctx);
   if (j.contains("obs_norm"))
     c.obs_norm = NormalizerConfigFromJson(j["obs_norm"], ctx + ".obs_norm");
   if (j.contains("reward_scaling")) {
@@ -108,6 +117,7 @@ PpoConfig PpoConfigFromJson(const Json& j, const std::string& ctx) {
   require(c.adam_beta2 >= 0 && c.adam_beta2 < 1, "adam_beta2", "must be in [0, 1)");
   require(c.adam_eps > 0, "adam_eps", "must be > 0");
   require(c.advantage_eps >= 0, "advantage_eps", "must be >= 0");
+  require(c.threads >= 1 && c.threads <= 256, "threads", "must be in [1, 256]");
   return c;
 }
 
@@ -134,14 +144,14 @@ PpoLossTerms PpoLoss(const ActorCritic& model, const float* params, const PpoCon
                      const Eigen::Ref<const VectorXf>& old_logp,
                      const Eigen::Ref<const VectorXf>& old_value,
                      const Eigen::Ref<const VectorXf>& adv, const Eigen::Ref<const VectorXf>& ret,
-                     PpoLossWorkspace* ws, float* grad) {
+                     PpoLossWorkspace* ws, float* grad, int mean_over) {
   const int b = static_cast<int>(obs.cols());
   model.Evaluate(params, obs, actions, &ws->eval);
   const PolicyEvalCache& ev = ws->eval;
   ws->dlogp.resize(b);
   ws->dent.resize(b);
   ws->dval.resize(b);
-  const float inv_b = 1.0f / b;
+  const float inv_b = 1.0f / (mean_over > 0 ? mean_over : b);
   const float clip = cfg.clip_range;
   const float vclip = cfg.value_clip_range;
   double pg = 0, vf = 0, kl = 0, cf = 0;
@@ -179,7 +189,8 @@ PpoLossTerms PpoLoss(const ActorCritic& model, const float* params, const PpoCon
   PpoLossTerms t;
   t.policy_loss = pg * inv_b;
   t.value_loss = vf * inv_b;
-  t.entropy = ev.entropy.cast<double>().mean();
+  t.entropy = mean_over > 0 ? ev.entropy.cast<double>().sum() * inv_b
+                            : ev.entropy.cast<double>().mean();
   t.approx_kl = kl * inv_b;
   t.clip_fraction = cf * inv_b;
   t.total = t.policy_loss - cfg.entropy_coef * t.entropy + cfg.value_coef * t.value_loss;
@@ -293,29 +304,35 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
       const int begin = static_cast<int>(static_cast<int64_t>(m) * n / num_mb);
       const int end = static_cast<int>(static_cast<int64_t>(m + 1) * n / num_mb);
       const int b = end - begin;
-      mb_obs_.resize(obs_dim, b);
-      mb_act_.resize(act_size, b);
-      mb_logp_.resize(b);
-      mb_value_.resize(b);
-      mb_adv_.resize(b);
-      mb_ret_.resize(b);
-      for (int k = 0; k < b; ++k) {
-        const int idx = perm_[begin + k];
-        mb_obs_.col(k) = obs_.col(idx);
-        mb_act_.col(k) = actions_.col(idx);
-        mb_logp_[k] = old_logp_[idx];
-        mb_value_[k] = old_value_[idx];
-        mb_adv_[k] = adv_[idx];
-        mb_ret_[k] = ret_[idx];
+      const int shards = std::min(ppo_.threads, b / kMinShardSamples);
+      PpoLossTerms lt;
+      if (shards > 1) {
+        lt = ShardedLoss(begin, b, shards, params);
+      } else {
+        mb_obs_.resize(obs_dim, b);
+        mb_act_.resize(act_size, b);
+        mb_logp_.resize(b);
+        mb_value_.resize(b);
+        mb_adv_.resize(b);
+        mb_ret_.resize(b);
+        for (int k = 0; k < b; ++k) {
+          const int idx = perm_[begin + k];
+          mb_obs_.col(k) = obs_.col(idx);
+          mb_act_.col(k) = actions_.col(idx);
+          mb_logp_[k] = old_logp_[idx];
+          mb_value_[k] = old_value_[idx];
+          mb_adv_[k] = adv_[idx];
+          mb_ret_[k] = ret_[idx];
+        }
+        if (ppo_.normalize_advantages && b > 1) {
+          const float mean = mb_adv_.mean();
+          const float sd = std::sqrt((mb_adv_.array() - mean).square().mean());
+          mb_adv_.array() = (mb_adv_.array() - mean) / (sd + ppo_.advantage_eps);
+        }
+        grad_.setZero();
+        lt = PpoLoss(model_, params, ppo_, mb_obs_, mb_act_, mb_logp_, mb_value_, mb_adv_,
+                     mb_ret_, &ws_, grad_.data());
       }
-      if (ppo_.normalize_advantages && b > 1) {
-        const float mean = mb_adv_.mean();
-        const float sd = std::sqrt((mb_adv_.array() - mean).square().mean());
-        mb_adv_.array() = (mb_adv_.array() - mean) / (sd + ppo_.advantage_eps);
-      }
-      grad_.setZero();
-      const PpoLossTerms lt = PpoLoss(model_, params, ppo_, mb_obs_, mb_act_, mb_logp_, mb_value_,
-                                      mb_adv_, mb_ret_, &ws_, grad_.data());
       grad_.array() *= model_.trainable_mask().array();
       const float gn = grad_.norm();
       if (ppo_.max_grad_norm > 0 && gn > ppo_.max_grad_norm) grad_ *= ppo_.max_grad_norm / gn;
@@ -342,6 +359,68 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
   ++num_updates_;
   num_samples_ += n;
   return st;
+}
+
+// One minibatch [begin, begin + b) of perm_ split into `shards` contiguous parts, one per thread:
+// each gathers its columns and adds its part of the minibatch-mean loss gradient (PpoLoss with
+// mean_over = b) into its own buffer; the parts are summed in shard order, so a thread count gives
+// the same result every run, and differs from one thread only in summation order.
+PpoLossTerms PpoLearner::ShardedLoss(int begin, int b, int shards, const float* params) {
+  if (!pool_ || pool_->threads() != ppo_.threads) pool_ = std::make_shared<WorkerPool>(ppo_.threads);
+  if (static_cast<int>(shards_.size()) < shards) shards_.resize(shards);
+  const int obs_dim = model_.obs_dim();
+  const int act_size = model_.action_size();
+  // Advantages are normalised over the whole minibatch, as in the one-thread path.
+  float adv_mean = 0.0f, adv_scale = 1.0f;
+  if (ppo_.normalize_advantages && b > 1) {
+    double sum = 0.0;
+    for (int k = 0; k < b; ++k) sum += adv_[perm_[begin + k]];
+    const double mean = sum / b;
+    double ss = 0.0;
+    for (int k = 0; k < b; ++k) {
+      const double d = adv_[perm_[begin + k]] - mean;
+      ss += d * d;
+    }
+    adv_mean = static_cast<float>(mean);
+    adv_scale = 1.0f / (static_cast<float>(std::sqrt(ss / b)) + ppo_.advantage_eps);
+  }
+  pool_->Run(shards, [&](int s) {
+    Shard& sh = shards_[s];
+    const int lo = begin + static_cast<int>(static_cast<int64_t>(s) * b / shards);
+    const int hi = begin + static_cast<int>(static_cast<int64_t>(s + 1) * b / shards);
+    const int bs = hi - lo;
+    sh.obs.resize(obs_dim, bs);
+    sh.act.resize(act_size, bs);
+    sh.logp.resize(bs);
+    sh.value.resize(bs);
+    sh.adv.resize(bs);
+    sh.ret.resize(bs);
+    for (int k = 0; k < bs; ++k) {
+      const int idx = perm_[lo + k];
+      sh.obs.col(k) = obs_.col(idx);
+      sh.act.col(k) = actions_.col(idx);
+      sh.logp[k] = old_logp_[idx];
+      sh.value[k] = old_value_[idx];
+      sh.adv[k] = (adv_[idx] - adv_mean) * adv_scale;
+      sh.ret[k] = ret_[idx];
+    }
+    sh.grad.setZero(model_.num_params());
+    sh.terms = PpoLoss(model_, params, ppo_, sh.obs, sh.act, sh.logp, sh.value, sh.adv, sh.ret,
+                       &sh.ws, sh.grad.data(), b);
+  });
+  grad_ = shards_[0].grad;
+  PpoLossTerms t = shards_[0].terms;
+  for (int s = 1; s < shards; ++s) {
+    grad_ += shards_[s].grad;
+    const PpoLossTerms& u = shards_[s].terms;
+    t.total += u.total;
+    t.policy_loss += u.policy_loss;
+    t.value_loss += u.value_loss;
+    t.entropy += u.entropy;
+    t.approx_kl += u.approx_kl;
+    t.clip_fraction += u.clip_fraction;
+  }
+  return t;
 }
 
 void PpoLearner::ExportWeights(proto::ModelWeights* w) const {

@@ -7,11 +7,13 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "common/json_util.h"
 #include "common/rng.h"
+#include "common/worker_pool.h"
 #include "learner/adam.h"
 #include "learner/normalizer.h"
 #include "learner/policy.h"
@@ -45,6 +47,9 @@ struct PpoConfig {
   float advantage_eps = 1e-8f;
   // DEVELOPERS.md: bootstrap on truncation. The authors treated the time limit as terminal (false).
   bool bootstrap_on_truncation = true;
+  // Threads of the PPO update (ours, issue 20): each minibatch's gradient is split across them.
+  // A count gives the same result every run; counts differ only in floating-point summation order.
+  int threads = 1;
   NormalizerConfig obs_norm;
   RewardScalingConfig reward_scaling;
 
@@ -86,13 +91,15 @@ struct PpoLossWorkspace {
   VectorXf dlogp, dent, dval;  // [B]
 };
 // Evaluates the loss at `params`; when grad != nullptr adds d total / d params into grad.
+// mean_over > 0: the means are over that many samples (a part of a minibatch split across threads:
+// the parts' terms and gradients then add up to the whole minibatch's); 0: over obs.cols().
 PpoLossTerms PpoLoss(const ActorCritic& model, const float* params, const PpoConfig& cfg,
                      const Eigen::Ref<const MatrixXf>& obs,
                      const Eigen::Ref<const MatrixXf>& actions,
                      const Eigen::Ref<const VectorXf>& old_logp,
                      const Eigen::Ref<const VectorXf>& old_value,
                      const Eigen::Ref<const VectorXf>& adv, const Eigen::Ref<const VectorXf>& ret,
-                     PpoLossWorkspace* ws, float* grad);
+                     PpoLossWorkspace* ws, float* grad, int mean_over = 0);
 
 class PpoLearner {
  public:
@@ -146,6 +153,17 @@ class PpoLearner {
   VectorXf grad_;
   PpoLossWorkspace ws_;
   std::vector<float> scaled_rewards_, seg_adv_, seg_ret_;
+
+  // ppo.threads > 1: one part of each minibatch per thread.
+  struct Shard {
+    MatrixXf obs, act;
+    VectorXf logp, value, adv, ret, grad;
+    PpoLossWorkspace ws;
+    PpoLossTerms terms;
+  };
+  PpoLossTerms ShardedLoss(int begin, int b, int shards, const float* params);
+  std::vector<Shard> shards_;
+  std::shared_ptr<WorkerPool> pool_;  // shared by copies (ImportState works on a copy)
 };
 
 }  // namespace perch

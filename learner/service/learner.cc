@@ -13,6 +13,7 @@
 
 #include "common/paths.h"
 #include "common/proto/model.pb.h"
+#include "learner/dense_kernels.h"
 
 namespace perch {
 
@@ -146,9 +147,10 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
     metrics_ = std::make_unique<MetricsServer>(options_.metrics_port, options_.metrics_bind);
   }
   spdlog::info(
-      "learner: task {} obs_dim {} action_size {} batch {} samples; rollouts on {}, "
-      "weights on {}, metrics on {}",
+      "learner: task {} obs_dim {} action_size {} batch {} samples; PPO on {} thread(s), {} "
+      "kernels; rollouts on {}, weights on {}, metrics on {}",
       setup_.cluster.task, limits_.obs_dim, limits_.act_dim, setup_.ppo.steps_per_update,
+      setup_.ppo.threads, ActiveDenseKernels().name,
       options_.rollout_bind, options_.weights_bind,
       metrics_ ? ":" + std::to_string(metrics_->port()) + "/metrics" : "off");
 }

@@ -4,6 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "learner/policy.h"
@@ -73,6 +76,85 @@ TEST(PpoUpdateTest, GlobalGradientClipIsApplied) {
   }
   EXPECT_LT(moved[0].cwiseAbs().maxCoeff(), 1e-6f);
   EXPECT_GT(moved[1].cwiseAbs().maxCoeff(), 1e-4f);
+}
+
+// ppo.threads (issue 20): each minibatch's gradient split across threads gives the one-thread
+// update up to floating-point summation order, and a thread count gives the same bits every run.
+TEST(PpoUpdateTest, ThreadsMatchOneThreadUpToSummationOrder) {
+  auto run = [](int threads, UpdateStats* st) {
+    PpoConfig cfg;
+    cfg.num_minibatches = 4;  // 150-sample minibatches: 2 or 3 parts of 50-75
+    cfg.num_epochs = 2;
+    cfg.threads = threads;
+    PpoLearner learner(PolicyConfig::Subtask(9), cfg, 5);
+    *st = learner.Update({Acted(learner, 350, 2), Acted(learner, 250, 3)});
+    return VectorXf(learner.model().params());
+  };
+  UpdateStats s1, s2, s2b, s3;
+  const VectorXf p1 = run(1, &s1), p2 = run(2, &s2), p2b = run(2, &s2b), p3 = run(3, &s3);
+  const VectorXf p0 = PpoLearner(PolicyConfig::Subtask(9), PpoConfig(), 5).model().params();
+  // The update moved the weights, by far more than the threads' differences.
+  const float moved = (p1 - p0).cwiseAbs().maxCoeff();
+  EXPECT_GT(moved, 1e-4f);
+  EXPECT_LT((p2 - p1).cwiseAbs().maxCoeff(), 1e-3f * moved);
+  EXPECT_LT((p3 - p1).cwiseAbs().maxCoeff(), 1e-3f * moved);
+  EXPECT_TRUE(p2 == p2b) << (p2 - p2b).cwiseAbs().maxCoeff();
+  EXPECT_EQ(s2.policy_loss, s2b.policy_loss);
+  for (const UpdateStats* s : {&s2, &s3}) {
+    EXPECT_NEAR(s->policy_loss, s1.policy_loss, 1e-4f * (1 + std::abs(s1.policy_loss)));
+    EXPECT_NEAR(s->value_loss, s1.value_loss, 1e-4f * (1 + s1.value_loss));
+    EXPECT_NEAR(s->entropy, s1.entropy, 1e-4f * (1 + std::abs(s1.entropy)));
+    EXPECT_NEAR(s->approx_kl, s1.approx_kl, 1e-5f + 1e-3f * s1.approx_kl);
+    EXPECT_NEAR(s->clip_fraction, s1.clip_fraction, 0.01f);
+    EXPECT_EQ(s->num_minibatch_steps, s1.num_minibatch_steps);
+  }
+}
+
+TEST(PpoUpdateTest, PartsOfAMinibatchAddUpToTheWhole) {
+  PpoConfig cfg;
+  PpoLearner learner(PolicyConfig::Subtask(9), cfg, 5);
+  const Rollout r = Acted(learner, 40, 2);
+  const ActorCritic& m = learner.model();
+  const MatrixXf obs = Eigen::Map<const MatrixXf>(r.obs.data(), 9, 40);
+  const MatrixXf act = Eigen::Map<const MatrixXf>(r.actions.data(), m.action_size(), 40);
+  const VectorXf logp = Eigen::Map<const VectorXf>(r.log_probs.data(), 40) .array() - 0.1f;
+  const VectorXf val = Eigen::Map<const VectorXf>(r.values.data(), 40);
+  VectorXf adv(40), ret(40);
+  Rng rng(3);
+  for (int k = 0; k < 40; ++k) {
+    adv[k] = static_cast<float>(rng.Normal());
+    ret[k] = static_cast<float>(rng.Normal());
+  }
+  PpoLossWorkspace ws;
+  VectorXf whole = VectorXf::Zero(m.num_params()), parts = VectorXf::Zero(m.num_params());
+  const PpoLossTerms tw = PpoLoss(m, m.params().data(), cfg, obs, act, logp, val, adv, ret, &ws,
+                                  whole.data());
+  PpoLossTerms tp;
+  for (auto [lo, n] : {std::pair{0, 13}, std::pair{13, 27}}) {
+    const PpoLossTerms t = PpoLoss(m, m.params().data(), cfg, obs.middleCols(lo, n),
+                                   act.middleCols(lo, n), logp.segment(lo, n), val.segment(lo, n),
+                                   adv.segment(lo, n), ret.segment(lo, n), &ws, parts.data(), 40);
+    tp.total += t.total;
+    tp.entropy += t.entropy;
+    tp.value_loss += t.value_loss;
+  }
+  EXPECT_NEAR(tp.total, tw.total, 1e-5 * (1 + std::abs(tw.total)));
+  EXPECT_NEAR(tp.entropy, tw.entropy, 1e-5 * (1 + std::abs(tw.entropy)));
+  EXPECT_NEAR(tp.value_loss, tw.value_loss, 1e-5 * (1 + tw.value_loss));
+  EXPECT_GT(whole.norm(), 0.0f);
+  EXPECT_LT((parts - whole).norm(), 1e-4f * whole.norm());
+}
+
+TEST(PpoConfigTest, ThreadsOutOfRangeAreRefusedByName) {
+  for (int bad : {0, -1, 257}) {
+    try {
+      PpoConfigFromJson(Json{{"threads", bad}}, "ppo");
+      FAIL() << bad;
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find("ppo.threads"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_EQ(PpoConfigFromJson(Json{{"threads", 4}}, "ppo").threads, 4);
 }
 
 }  // namespace
