@@ -21,7 +21,7 @@ class WorkerPool {
   // threads >= 1 counts the caller: WorkerPool(1) starts no thread and runs everything inline.
   // spin_us: how long a worker polls for the next round (and the caller for the workers) before
   // sleeping.
-  explicit WorkerPool(int threads, double spin_us = 200.0);
+  explicit WorkerPool(int threads, double spin_us = 2000.0);
   ~WorkerPool();
   WorkerPool(const WorkerPool&) = delete;
   WorkerPool& operator=(const WorkerPool&) = delete;

@@ -24,6 +24,23 @@ void Adam::Step(Eigen::VectorXf& params, const Eigen::VectorXf& grad, float lr) 
   params.array() -= lr_t * m_.array() / (v_.array().sqrt() + eps_);
 }
 
+float Adam::BeginStep(float lr) {
+  ++step_;
+  const double t = static_cast<double>(step_);
+  return static_cast<float>(lr * std::sqrt(1.0 - std::pow(beta2_, t)) / (1.0 - std::pow(beta1_, t)));
+}
+
+void Adam::ApplyRange(float* params, const float* grad, float lr_t, int begin, int end) {
+  const int n = end - begin;
+  Eigen::Map<Eigen::VectorXf> p(params + begin, n);
+  Eigen::Map<const Eigen::VectorXf> g(grad + begin, n);
+  auto m = m_.segment(begin, n);
+  auto v = v_.segment(begin, n);
+  m = beta1_ * m + (1.0f - beta1_) * g;
+  v = beta2_ * v + (1.0f - beta2_) * g.cwiseAbs2();
+  p.array() -= lr_t * m.array() / (v.array().sqrt() + eps_);
+}
+
 void Adam::ToProto(proto::AdamState* p) const {
   p->set_step(step_);
   p->mutable_m()->Assign(m_.data(), m_.data() + m_.size());

@@ -20,6 +20,11 @@ class Adam {
 
   // One step; grad is not modified.
   void Step(Eigen::VectorXf& params, const Eigen::VectorXf& grad, float lr);
+  // The same step in parts, for threads that own disjoint ranges of the parameters: BeginStep
+  // once (counts the step, returns the bias-corrected rate), then ApplyRange over ranges that
+  // cover [0, num_params) once each.
+  float BeginStep(float lr);
+  void ApplyRange(float* params, const float* grad, float lr_t, int begin, int end);
 
   int64_t step() const { return step_; }
   const Eigen::VectorXf& m() const { return m_; }

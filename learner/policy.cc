@@ -135,6 +135,13 @@ ActorCritic::ActorCritic(const PolicyConfig& config, uint64_t seed) : config_(co
 void ActorCritic::Evaluate(const float* params, const Eigen::Ref<const MatrixXf>& obs,
                            const Eigen::Ref<const MatrixXf>& actions,
                            PolicyEvalCache* cache) const {
+  EvaluatePolicy(params, obs, actions, cache);
+  EvaluateValue(params, obs, cache);
+}
+
+void ActorCritic::EvaluatePolicy(const float* params, const Eigen::Ref<const MatrixXf>& obs,
+                                 const Eigen::Ref<const MatrixXf>& actions,
+                                 PolicyEvalCache* cache) const {
   const int k = config_.act_dim;
   const Eigen::Index batch = obs.cols();
   const bool meta = config_.kind == PolicyKind::kMeta;
@@ -189,7 +196,10 @@ void ActorCritic::Evaluate(const float* params, const Eigen::Ref<const MatrixXf>
       cache->entropy[b] += h;
     }
   }
+}
 
+void ActorCritic::EvaluateValue(const float* params, const Eigen::Ref<const MatrixXf>& obs,
+                                PolicyEvalCache* cache) const {
   vf_.Forward(params + value_offset_, obs, &cache->vf);
   cache->value = cache->vf.out().row(0).transpose();
 }
@@ -198,6 +208,13 @@ void ActorCritic::Backward(const float* params, const Eigen::Ref<const VectorXf>
                            const Eigen::Ref<const VectorXf>& dent,
                            const Eigen::Ref<const VectorXf>& dval, PolicyEvalCache* cache,
                            float* grad_params) const {
+  BackwardPolicy(params, dlogp, dent, cache, grad_params);
+  BackwardValue(params, dval, cache, grad_params);
+}
+
+void ActorCritic::BackwardPolicy(const float* params, const Eigen::Ref<const VectorXf>& dlogp,
+                                 const Eigen::Ref<const VectorXf>& dent, PolicyEvalCache* cache,
+                                 float* grad_params) const {
   const int k = config_.act_dim;
   const Eigen::Index batch = dlogp.size();
   const bool meta = config_.kind == PolicyKind::kMeta;
@@ -234,7 +251,11 @@ void ActorCritic::Backward(const float* params, const Eigen::Ref<const VectorXf>
     }
   }
   pi_.Backward(params, cache->grad_head, &cache->pi, grad_params);
+}
 
+void ActorCritic::BackwardValue(const float* params, const Eigen::Ref<const VectorXf>& dval,
+                                PolicyEvalCache* cache, float* grad_params) const {
+  const Eigen::Index batch = dval.size();
   cache->grad_value.resize(1, batch);
   cache->grad_value.row(0) = dval.transpose();
   vf_.Backward(params + value_offset_, cache->grad_value, &cache->vf, grad_params + value_offset_);

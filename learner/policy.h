@@ -105,6 +105,18 @@ class ActorCritic {
   void Backward(const float* params, const Eigen::Ref<const VectorXf>& dlogp,
                 const Eigen::Ref<const VectorXf>& dent, const Eigen::Ref<const VectorXf>& dval,
                 PolicyEvalCache* cache, float* grad_params) const;
+  // The two independent halves of Evaluate and Backward: the policy network (log_prob, entropy;
+  // its weights and log_std) and the value network (value; its weights). They read and write
+  // disjoint parts of the cache and of grad_params, so two threads may run one each.
+  void EvaluatePolicy(const float* params, const Eigen::Ref<const MatrixXf>& obs,
+                      const Eigen::Ref<const MatrixXf>& actions, PolicyEvalCache* cache) const;
+  void EvaluateValue(const float* params, const Eigen::Ref<const MatrixXf>& obs,
+                     PolicyEvalCache* cache) const;
+  void BackwardPolicy(const float* params, const Eigen::Ref<const VectorXf>& dlogp,
+                      const Eigen::Ref<const VectorXf>& dent, PolicyEvalCache* cache,
+                      float* grad_params) const;
+  void BackwardValue(const float* params, const Eigen::Ref<const VectorXf>& dval,
+                     PolicyEvalCache* cache, float* grad_params) const;
 
   // Shape as on the wire; CheckShape throws ConfigError "ctx: <field> differs (blob X, model Y)".
   void GetShape(proto::PolicyShape* shape) const;

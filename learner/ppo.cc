@@ -138,15 +138,12 @@ Json ToJson(const UpdateStats& s) {
               {"log_std_mean", s.log_std_mean}};
 }
 
-PpoLossTerms PpoLoss(const ActorCritic& model, const float* params, const PpoConfig& cfg,
-                     const Eigen::Ref<const MatrixXf>& obs,
-                     const Eigen::Ref<const MatrixXf>& actions,
-                     const Eigen::Ref<const VectorXf>& old_logp,
-                     const Eigen::Ref<const VectorXf>& old_value,
-                     const Eigen::Ref<const VectorXf>& adv, const Eigen::Ref<const VectorXf>& ret,
-                     PpoLossWorkspace* ws, float* grad, int mean_over) {
-  const int b = static_cast<int>(obs.cols());
-  model.Evaluate(params, obs, actions, &ws->eval);
+PpoLossTerms PpoLossFromEval(const PpoConfig& cfg, const Eigen::Ref<const VectorXf>& old_logp,
+                             const Eigen::Ref<const VectorXf>& old_value,
+                             const Eigen::Ref<const VectorXf>& adv,
+                             const Eigen::Ref<const VectorXf>& ret, PpoLossWorkspace* ws,
+                             int mean_over) {
+  const int b = static_cast<int>(adv.size());
   const PolicyEvalCache& ev = ws->eval;
   ws->dlogp.resize(b);
   ws->dent.resize(b);
@@ -194,6 +191,18 @@ PpoLossTerms PpoLoss(const ActorCritic& model, const float* params, const PpoCon
   t.approx_kl = kl * inv_b;
   t.clip_fraction = cf * inv_b;
   t.total = t.policy_loss - cfg.entropy_coef * t.entropy + cfg.value_coef * t.value_loss;
+  return t;
+}
+
+PpoLossTerms PpoLoss(const ActorCritic& model, const float* params, const PpoConfig& cfg,
+                     const Eigen::Ref<const MatrixXf>& obs,
+                     const Eigen::Ref<const MatrixXf>& actions,
+                     const Eigen::Ref<const VectorXf>& old_logp,
+                     const Eigen::Ref<const VectorXf>& old_value,
+                     const Eigen::Ref<const VectorXf>& adv, const Eigen::Ref<const VectorXf>& ret,
+                     PpoLossWorkspace* ws, float* grad, int mean_over) {
+  model.Evaluate(params, obs, actions, &ws->eval);
+  const PpoLossTerms t = PpoLossFromEval(cfg, old_logp, old_value, adv, ret, ws, mean_over);
   if (grad != nullptr) model.Backward(params, ws->dlogp, ws->dent, ws->dval, &ws->eval, grad);
   return t;
 }
@@ -304,10 +313,13 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
       const int begin = static_cast<int>(static_cast<int64_t>(m) * n / num_mb);
       const int end = static_cast<int>(static_cast<int64_t>(m + 1) * n / num_mb);
       const int b = end - begin;
-      const int shards = std::min(ppo_.threads, b / kMinShardSamples);
+      // Threads: the policy and value networks of a part of the minibatch each on a thread.
+      const int shards = std::max(1, std::min(ppo_.threads / 2, b / kMinShardSamples));
       PpoLossTerms lt;
-      if (shards > 1) {
+      float gn;
+      if (ppo_.threads > 1) {
         lt = ShardedLoss(begin, b, shards, params);
+        gn = shards > 1 ? ShardedStep() : SerialStep(&shards_[0].grad);
       } else {
         mb_obs_.resize(obs_dim, b);
         mb_act_.resize(act_size, b);
@@ -332,11 +344,8 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
         grad_.setZero();
         lt = PpoLoss(model_, params, ppo_, mb_obs_, mb_act_, mb_logp_, mb_value_, mb_adv_,
                      mb_ret_, &ws_, grad_.data());
+        gn = SerialStep(&grad_);
       }
-      grad_.array() *= model_.trainable_mask().array();
-      const float gn = grad_.norm();
-      if (ppo_.max_grad_norm > 0 && gn > ppo_.max_grad_norm) grad_ *= ppo_.max_grad_norm / gn;
-      adam_.Step(model_.params(), grad_, ppo_.learning_rate);
       params = model_.params().data();
 
       acc_pg += lt.policy_loss;
@@ -361,18 +370,22 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
   return st;
 }
 
-// One minibatch [begin, begin + b) of perm_ split into `shards` contiguous parts, one per thread:
-// each gathers its columns and adds its part of the minibatch-mean loss gradient (PpoLoss with
-// mean_over = b) into its own buffer; the parts are summed in shard order, so a thread count gives
-// the same result every run, and differs from one thread only in summation order.
+// One minibatch [begin, begin + b) of perm_ on ppo.threads threads: split into `shards` contiguous
+// parts, and each part's policy and value networks (independent: disjoint weights and gradients)
+// run on threads of their own. Each part adds its share of the minibatch-mean loss gradient
+// (PpoLossFromEval with mean_over = b) into its own buffer. With one part (2 or 3 threads) the
+// arithmetic is exactly the one-thread update's; with more, the parts' sums add in part order, so
+// a thread count still gives the same bits every run.
 PpoLossTerms PpoLearner::ShardedLoss(int begin, int b, int shards, const float* params) {
   if (!pool_ || pool_->threads() != ppo_.threads) pool_ = std::make_shared<WorkerPool>(ppo_.threads);
   if (static_cast<int>(shards_.size()) < shards) shards_.resize(shards);
+  active_shards_ = shards;
   const int obs_dim = model_.obs_dim();
   const int act_size = model_.action_size();
-  // Advantages are normalised over the whole minibatch, as in the one-thread path.
+  const bool normalize = ppo_.normalize_advantages && b > 1;
+  // Several parts: advantages normalised over the whole minibatch, as one thread does.
   float adv_mean = 0.0f, adv_scale = 1.0f;
-  if (ppo_.normalize_advantages && b > 1) {
+  if (normalize && shards > 1) {
     double sum = 0.0;
     for (int k = 0; k < b; ++k) sum += adv_[perm_[begin + k]];
     const double mean = sum / b;
@@ -384,11 +397,14 @@ PpoLossTerms PpoLearner::ShardedLoss(int begin, int b, int shards, const float* 
     adv_mean = static_cast<float>(mean);
     adv_scale = 1.0f / (static_cast<float>(std::sqrt(ss / b)) + ppo_.advantage_eps);
   }
+  auto bounds = [&](int s, int* lo, int* bs) {
+    *lo = begin + static_cast<int>(static_cast<int64_t>(s) * b / shards);
+    *bs = begin + static_cast<int>(static_cast<int64_t>(s + 1) * b / shards) - *lo;
+  };
   pool_->Run(shards, [&](int s) {
     Shard& sh = shards_[s];
-    const int lo = begin + static_cast<int>(static_cast<int64_t>(s) * b / shards);
-    const int hi = begin + static_cast<int>(static_cast<int64_t>(s + 1) * b / shards);
-    const int bs = hi - lo;
+    int lo, bs;
+    bounds(s, &lo, &bs);
     sh.obs.resize(obs_dim, bs);
     sh.act.resize(act_size, bs);
     sh.logp.resize(bs);
@@ -401,17 +417,42 @@ PpoLossTerms PpoLearner::ShardedLoss(int begin, int b, int shards, const float* 
       sh.act.col(k) = actions_.col(idx);
       sh.logp[k] = old_logp_[idx];
       sh.value[k] = old_value_[idx];
-      sh.adv[k] = (adv_[idx] - adv_mean) * adv_scale;
+      sh.adv[k] = adv_[idx];
       sh.ret[k] = ret_[idx];
     }
-    sh.grad.setZero(model_.num_params());
-    sh.terms = PpoLoss(model_, params, ppo_, sh.obs, sh.act, sh.logp, sh.value, sh.adv, sh.ret,
-                       &sh.ws, sh.grad.data(), b);
+    if (normalize && shards == 1) {
+      // The one-thread path's expressions, for the same bits.
+      const float mean = sh.adv.mean();
+      const float sd = std::sqrt((sh.adv.array() - mean).square().mean());
+      sh.adv.array() = (sh.adv.array() - mean) / (sd + ppo_.advantage_eps);
+    } else if (normalize) {
+      sh.adv.array() = (sh.adv.array() - adv_mean) * adv_scale;
+    }
   });
-  grad_ = shards_[0].grad;
+  pool_->Run(2 * shards, [&](int t) {
+    Shard& sh = shards_[t / 2];
+    if (t % 2 == 0) {
+      model_.EvaluatePolicy(params, sh.obs, sh.act, &sh.ws.eval);
+    } else {
+      model_.EvaluateValue(params, sh.obs, &sh.ws.eval);
+    }
+  });
+  pool_->Run(shards, [&](int s) {
+    Shard& sh = shards_[s];
+    sh.terms = PpoLossFromEval(ppo_, sh.logp, sh.value, sh.adv, sh.ret, &sh.ws,
+                               shards > 1 ? b : 0);
+    sh.grad.setZero(model_.num_params());
+  });
+  pool_->Run(2 * shards, [&](int t) {
+    Shard& sh = shards_[t / 2];
+    if (t % 2 == 0) {
+      model_.BackwardPolicy(params, sh.ws.dlogp, sh.ws.dent, &sh.ws.eval, sh.grad.data());
+    } else {
+      model_.BackwardValue(params, sh.ws.dval, &sh.ws.eval, sh.grad.data());
+    }
+  });
   PpoLossTerms t = shards_[0].terms;
   for (int s = 1; s < shards; ++s) {
-    grad_ += shards_[s].grad;
     const PpoLossTerms& u = shards_[s].terms;
     t.total += u.total;
     t.policy_loss += u.policy_loss;
@@ -421,6 +462,53 @@ PpoLossTerms PpoLearner::ShardedLoss(int begin, int b, int shards, const float* 
     t.clip_fraction += u.clip_fraction;
   }
   return t;
+}
+
+// Mask, global-norm clip and the Adam step on one gradient, as the one-thread update does.
+float PpoLearner::SerialStep(VectorXf* grad) {
+  VectorXf& g = *grad;
+  g.array() *= model_.trainable_mask().array();
+  const float gn = g.norm();
+  if (ppo_.max_grad_norm > 0 && gn > ppo_.max_grad_norm) g *= ppo_.max_grad_norm / gn;
+  adam_.Step(model_.params(), g, ppo_.learning_rate);
+  return gn;
+}
+
+// After ShardedLoss: the parts' gradients summed, masked, clipped to the global norm and the Adam
+// step, each thread on its own range of the parameters (two rounds: the norm needs every range).
+// Returns the gradient norm before clipping.
+float PpoLearner::ShardedStep() {
+  const int np = model_.num_params();
+  const int ranges = std::min(ppo_.threads, std::max(1, np / 1024));
+  range_sq_.assign(ranges, 0.0);
+  const float* mask = model_.trainable_mask().data();
+  auto range = [&](int r, int* lo, int* hi) {
+    *lo = static_cast<int>(static_cast<int64_t>(r) * np / ranges);
+    *hi = static_cast<int>(static_cast<int64_t>(r + 1) * np / ranges);
+  };
+  pool_->Run(ranges, [&](int r) {
+    int lo, hi;
+    range(r, &lo, &hi);
+    auto g = grad_.segment(lo, hi - lo);
+    g = shards_[0].grad.segment(lo, hi - lo);
+    for (int s = 1; s < active_shards_; ++s) g += shards_[s].grad.segment(lo, hi - lo);
+    g.array() *= Eigen::Map<const VectorXf>(mask + lo, hi - lo).array();
+    range_sq_[r] = g.squaredNorm();
+  });
+  double sq = 0.0;
+  for (double v : range_sq_) sq += v;
+  const float gn = static_cast<float>(std::sqrt(sq));
+  const float scale =
+      ppo_.max_grad_norm > 0 && gn > ppo_.max_grad_norm ? ppo_.max_grad_norm / gn : 1.0f;
+  const float lr_t = adam_.BeginStep(ppo_.learning_rate);
+  float* params = model_.params().data();
+  pool_->Run(ranges, [&](int r) {
+    int lo, hi;
+    range(r, &lo, &hi);
+    if (scale != 1.0f) grad_.segment(lo, hi - lo) *= scale;
+    adam_.ApplyRange(params, grad_.data(), lr_t, lo, hi);
+  });
+  return gn;
 }
 
 void PpoLearner::ExportWeights(proto::ModelWeights* w) const {

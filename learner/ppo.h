@@ -90,6 +90,13 @@ struct PpoLossWorkspace {
   PolicyEvalCache eval;
   VectorXf dlogp, dent, dval;  // [B]
 };
+// The loss terms from an evaluated ws->eval (ActorCritic::Evaluate), and ws->dlogp, dent, dval
+// for ActorCritic::Backward. mean_over as for PpoLoss.
+PpoLossTerms PpoLossFromEval(const PpoConfig& cfg, const Eigen::Ref<const VectorXf>& old_logp,
+                             const Eigen::Ref<const VectorXf>& old_value,
+                             const Eigen::Ref<const VectorXf>& adv,
+                             const Eigen::Ref<const VectorXf>& ret, PpoLossWorkspace* ws,
+                             int mean_over = 0);
 // Evaluates the loss at `params`; when grad != nullptr adds d total / d params into grad.
 // mean_over > 0: the means are over that many samples (a part of a minibatch split across threads:
 // the parts' terms and gradients then add up to the whole minibatch's); 0: over obs.cols().
@@ -162,6 +169,10 @@ class PpoLearner {
     PpoLossTerms terms;
   };
   PpoLossTerms ShardedLoss(int begin, int b, int shards, const float* params);
+  float ShardedStep();
+  float SerialStep(VectorXf* grad);
+  int active_shards_ = 0;
+  std::vector<double> range_sq_;
   std::vector<Shard> shards_;
   std::shared_ptr<WorkerPool> pool_;  // shared by copies (ImportState works on a copy)
 };

@@ -78,34 +78,43 @@ TEST(PpoUpdateTest, GlobalGradientClipIsApplied) {
   EXPECT_GT(moved[1].cwiseAbs().maxCoeff(), 1e-4f);
 }
 
-// ppo.threads (issue 20): each minibatch's gradient split across threads gives the one-thread
-// update up to floating-point summation order, and a thread count gives the same bits every run.
-TEST(PpoUpdateTest, ThreadsMatchOneThreadUpToSummationOrder) {
+// ppo.threads (issue 20): 2 or 3 threads run the policy and the value network of each minibatch
+// side by side, which is the one-thread arithmetic exactly; 4 or more also split the minibatch,
+// which differs from one thread only in summation order; any count gives the same bits every run.
+TEST(PpoUpdateTest, ThreadsMatchOneThread) {
   auto run = [](int threads, UpdateStats* st) {
     PpoConfig cfg;
-    cfg.num_minibatches = 4;  // 150-sample minibatches: 2 or 3 parts of 50-75
+    cfg.num_minibatches = 4;  // 150-sample minibatches: parts of 75 or 50
     cfg.num_epochs = 2;
     cfg.threads = threads;
     PpoLearner learner(PolicyConfig::Subtask(9), cfg, 5);
     *st = learner.Update({Acted(learner, 350, 2), Acted(learner, 250, 3)});
     return VectorXf(learner.model().params());
   };
-  UpdateStats s1, s2, s2b, s3;
-  const VectorXf p1 = run(1, &s1), p2 = run(2, &s2), p2b = run(2, &s2b), p3 = run(3, &s3);
+  UpdateStats s1, s2, s3, s4, s4b, s6;
+  const VectorXf p1 = run(1, &s1), p2 = run(2, &s2), p3 = run(3, &s3), p4 = run(4, &s4),
+                 p4b = run(4, &s4b), p6 = run(6, &s6);
   const VectorXf p0 = PpoLearner(PolicyConfig::Subtask(9), PpoConfig(), 5).model().params();
-  // The update moved the weights, by far more than the threads' differences.
+  EXPECT_TRUE(p2 == p1) << (p2 - p1).cwiseAbs().maxCoeff();
+  EXPECT_TRUE(p3 == p1) << (p3 - p1).cwiseAbs().maxCoeff();
+  EXPECT_EQ(s2.policy_loss, s1.policy_loss);
+  EXPECT_EQ(s2.value_loss, s1.value_loss);
+  EXPECT_EQ(s2.grad_norm, s1.grad_norm);
+  // Split minibatches: the update moved the weights by far more than the split changes them.
   const float moved = (p1 - p0).cwiseAbs().maxCoeff();
   EXPECT_GT(moved, 1e-4f);
-  EXPECT_LT((p2 - p1).cwiseAbs().maxCoeff(), 1e-3f * moved);
-  EXPECT_LT((p3 - p1).cwiseAbs().maxCoeff(), 1e-3f * moved);
-  EXPECT_TRUE(p2 == p2b) << (p2 - p2b).cwiseAbs().maxCoeff();
-  EXPECT_EQ(s2.policy_loss, s2b.policy_loss);
-  for (const UpdateStats* s : {&s2, &s3}) {
+  EXPECT_FALSE(p4 == p1);  // the split path did run
+  EXPECT_LT((p4 - p1).cwiseAbs().maxCoeff(), 1e-3f * moved);
+  EXPECT_LT((p6 - p1).cwiseAbs().maxCoeff(), 1e-3f * moved);
+  EXPECT_TRUE(p4 == p4b) << (p4 - p4b).cwiseAbs().maxCoeff();
+  EXPECT_EQ(s4.policy_loss, s4b.policy_loss);
+  for (const UpdateStats* s : {&s4, &s6}) {
     EXPECT_NEAR(s->policy_loss, s1.policy_loss, 1e-4f * (1 + std::abs(s1.policy_loss)));
     EXPECT_NEAR(s->value_loss, s1.value_loss, 1e-4f * (1 + s1.value_loss));
     EXPECT_NEAR(s->entropy, s1.entropy, 1e-4f * (1 + std::abs(s1.entropy)));
     EXPECT_NEAR(s->approx_kl, s1.approx_kl, 1e-5f + 1e-3f * s1.approx_kl);
     EXPECT_NEAR(s->clip_fraction, s1.clip_fraction, 0.01f);
+    EXPECT_NEAR(s->grad_norm, s1.grad_norm, 1e-4f * s1.grad_norm);
     EXPECT_EQ(s->num_minibatch_steps, s1.num_minibatch_steps);
   }
 }
