@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <thread>
 
 #include "common/proto/model.pb.h"
@@ -27,6 +28,7 @@ ActorService::ActorService(zmq::context_t& ctx, const ActorSetup& setup,
   Rng id_rng(static_cast<uint64_t>(MonotonicSeconds() * 1e9) ^
              (static_cast<uint64_t>(::getpid()) << 20) ^ options.actor_id);
   instance_ = id_rng.NextU64();
+  credit_carry_ = id_rng.Uniform();  // flow control: actors on fractional grants take turns
   for (int i = 0; i < options_.num_envs; ++i) {
     envs_.push_back(setup_.make_env());
     Env* env = envs_.back().get();
@@ -102,6 +104,42 @@ void ActorService::MaybeHeartbeat() {
   Send(m.SerializeAsString());
 }
 
+// A grant is what this actor may send stamped with the current version: a new version starts the
+// count again, a new grant for the same version only moves the limit. Fractional grants add up
+// across versions (credit_carry_): 0.25 is one segment every fourth version. The carry starts at
+// a fraction drawn per process, so that many actors on small grants take turns.
+void ActorService::TakeCredit(const proto::Weights& w) {
+  const bool new_version = w.run_id() != credit_run_id_ || w.version() != credit_version_;
+  if (new_version) {
+    if (credit_run_id_ != 0 || credit_version_ != ~uint64_t{0}) {
+      // What the last version's grant left unused is not carried (the learner has moved on);
+      // only its fraction is.
+      credit_carry_ = credit_base_ + credit_segments_ - std::floor(credit_base_ + credit_segments_);
+    }
+    credit_run_id_ = w.run_id();
+    credit_version_ = w.version();
+    credit_base_ = credit_carry_;
+    sent_in_grant_ = 0;
+  }
+  credit_segments_ = w.credit_segments();
+  credit_epoch_ = w.credit_epoch();
+  credit_allowance_ =
+      credit_segments_ > 0 ? static_cast<uint64_t>(std::floor(credit_base_ + credit_segments_)) : 0;
+}
+
+void ActorService::WaitForCredit() {
+  if (credit_segments_ <= 0 || sent_in_grant_ < credit_allowance_) return;
+  // The learner has all it will use from this version: wait for the next one (or a new grant)
+  // rather than make samples that would be dropped as stale.
+  ++counters_.credit_waits;
+  const double t0 = MonotonicSeconds();
+  while (!Stopping() && credit_segments_ > 0 && sent_in_grant_ >= credit_allowance_) {
+    PollWeights(50);
+    MaybeHeartbeat();
+  }
+  counters_.credit_wait_s += MonotonicSeconds() - t0;
+}
+
 bool ActorService::PollWeights(int timeout_ms) {
   zmq::message_t msg, newest;
   bool got = false;
@@ -127,7 +165,9 @@ bool ActorService::PollWeights(int timeout_ms) {
   }
   const proto::Weights& w = m.weights();
   if (have_weights_ && w.run_id() == weights_run_id_ && w.version() == runner_.version()) {
-    return false;  // a republish for someone else
+    // Same weights: a republish for someone else, or a fresh credit grant for this version.
+    if (w.credit_epoch() != credit_epoch_) TakeCredit(w);
+    return false;
   }
   for (const proto::TaskPolicy& p : w.policies()) {
     if (p.task() != task_) continue;
@@ -145,6 +185,7 @@ bool ActorService::PollWeights(int timeout_ms) {
     weights_run_id_ = w.run_id();
     have_weights_ = true;
     ++counters_.weights_loaded;
+    TakeCredit(w);
     return true;
   }
   ++counters_.weights_rejected;
@@ -178,6 +219,8 @@ void ActorService::Run() {
        ++seg) {
     // One segment per env with the same weights, then take new weights (between segments).
     for (size_t i = 0; i < envs_.size() && !Stopping(); ++i) {
+      WaitForCredit();
+      if (Stopping()) break;
       EpisodeStats eps;
       collectors_[i]->Collect(&runner_, no_subtasks, rng_, setup_.cluster.segment_steps,
                               &rollouts[i], &eps);
@@ -214,12 +257,14 @@ void ActorService::Run() {
           rollouts[i].bootstrap_values.empty() ? 0.0f : rollouts[i].bootstrap_values.back());
       if (!Send(m.SerializeAsString())) break;
       ++counters_.segments_sent;
+      ++sent_in_grant_;
     }
     PollWeights(0);
     MaybeHeartbeat();
   }
-  spdlog::info("actor {}: stopped after {} segments, {} env steps", options_.actor_id,
-               counters_.segments_sent, counters_.env_steps);
+  spdlog::info("actor {}: stopped after {} segments, {} env steps; waited {:.1f} s for credit",
+               options_.actor_id, counters_.segments_sent, counters_.env_steps,
+               counters_.credit_wait_s);
 }
 
 }  // namespace perch

@@ -46,6 +46,8 @@ struct ActorCounters {
   uint64_t weights_rejected = 0;
   uint64_t bytes_sent = 0;
   uint64_t episodes = 0;
+  uint64_t credit_waits = 0;   // times the actor used up its credit and waited (flow control)
+  double credit_wait_s = 0.0;  // seconds spent waiting for credit
 };
 
 class ActorService {
@@ -65,6 +67,8 @@ class ActorService {
   bool Send(const std::string& bytes);  // false when stopped before it could be queued
   void SendHello();
   void MaybeHeartbeat();
+  void TakeCredit(const proto::Weights& w);
+  void WaitForCredit();  // blocks while this version's credit is used up
 
   ActorSetup setup_;
   ActorOptions options_;
@@ -75,6 +79,14 @@ class ActorService {
   PolicyRunner runner_;
   uint64_t weights_run_id_ = 0;
   bool have_weights_ = false;
+  double credit_segments_ = 0.0;  // granted per weights version; 0: no limit
+  uint64_t credit_epoch_ = 0;
+  double credit_carry_ = 0.0;     // fraction carried into the next version, in [0, 1)
+  double credit_base_ = 0.0;      // the carry this version started with
+  uint64_t credit_allowance_ = 0;  // floor(base + grant): segments this version may send
+  uint64_t sent_in_grant_ = 0;    // segments sent stamped with credit_version_
+  uint64_t credit_run_id_ = 0;
+  uint64_t credit_version_ = ~uint64_t{0};
   std::vector<std::unique_ptr<Env>> envs_;
   std::vector<std::unique_ptr<HierarchicalCollector>> collectors_;
   Rng rng_;

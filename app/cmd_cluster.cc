@@ -657,6 +657,85 @@ int RunBenchCluster(const BenchFlags& f) {
   return ok ? 0 : 1;
 }
 
+// ---- perch bench flow ----
+
+// Flow control (issue 20): learner + N actor processes, with the config's credit and with none,
+// on an env whose actors outrun the learner (the mock env by default). Per run, over the window
+// from the first update to the last: the learner's samples/s, the share of segments dropped as
+// stale, and the CPU the actors and the learner used (cores = CPU seconds per wall second).
+struct BenchFlowFlags {
+  std::string config = "configs/mock.json";
+  std::vector<int> actors = {1, 4, 16};
+  double seconds = 15.0;
+  bool json = false;
+};
+
+int RunBenchFlow(const BenchFlowFlags& f) {
+  LogToStderr("bench");
+  InstallStopHandlers();
+  const Json base = LoadComposedConfig(f.config);
+  const double slack_on = LoadExperimentConfig(f.config).cluster.credit_slack > 0
+                              ? LoadExperimentConfig(f.config).cluster.credit_slack
+                              : 1.0;
+  Json runs = Json::array();
+  bool ok = true;
+  for (int n : f.actors) {
+    if (n < 1) throw ConfigError("--actors: counts must be >= 1");
+    for (const bool credit : {true, false}) {
+      if (g_stop.load()) break;
+      Json j = base;
+      j["cluster"]["credit_slack"] = credit ? slack_on : 0.0;
+      const std::string dir = MakeTempDir();
+      const std::string cfg = dir + "/config.json";
+      SaveJsonFileAtomic(cfg, j);
+      ClusterRunOptions o;
+      o.exe = SelfExe();
+      o.config = cfg;
+      o.actors = n;
+      o.envs = LoadExperimentConfig(cfg).cluster.envs_per_actor;
+      o.seconds = f.seconds;
+      o.dir = dir;
+      const ClusterRun run = RunCluster(o);
+      Json r{{"actors", n}, {"credit", credit}, {"credit_slack", credit ? slack_on : 0.0}};
+      if (!run.ok()) {
+        r["error"] = "fewer than 3 updates (logs in " + dir + ")";
+        ok = false;
+        runs.push_back(r);
+        continue;
+      }
+      const Json& a = run.rows[run.First()];
+      const Json& b = run.rows.back();
+      const double secs = run.Seconds();
+      const double stale = b["dropped_stale"].get<double>() - a["dropped_stale"].get<double>();
+      const double segs = b["segments"].get<double>() - a["segments"].get<double>();
+      r["learner_samples_per_s"] = run.Samples() / secs;
+      r["updates"] = static_cast<int>(run.rows.size());
+      r["segments_accepted"] = segs;
+      r["segments_stale"] = stale;
+      r["drop_share"] = segs + stale > 0 ? stale / (segs + stale) : 0.0;
+      r["actor_cpu_cores"] = (run.Cpu() - run.LearnerCpu()) / secs;
+      r["learner_cpu_cores"] = run.LearnerCpu() / secs;
+      r["actor_cpu_s_per_1k_samples"] = 1e3 * (run.Cpu() - run.LearnerCpu()) / run.Samples();
+      r["policy_lag_mean"] = b["policy_lag_mean"];
+      r["credit_segments_last"] = b.value("credit_segments", 0);
+      spdlog::info(
+          "bench flow: {} actors, credit {}: {:.0f} samples/s, {:.1f}% stale, actors {:.2f} cores, "
+          "learner {:.2f}",
+          n, credit ? "on" : "off", r["learner_samples_per_s"].get<double>(),
+          100 * r["drop_share"].get<double>(), r["actor_cpu_cores"].get<double>(),
+          r["learner_cpu_cores"].get<double>());
+      runs.push_back(r);
+    }
+  }
+  const Json out{{"bench", "flow"},
+                 {"config", f.config},
+                 {"seconds", f.seconds},
+                 {"cores", static_cast<int>(std::max(1u, std::thread::hardware_concurrency()))},
+                 {"runs", runs}};
+  std::cout << (f.json ? out.dump() : out.dump(2)) << std::endl;
+  return ok ? 0 : 1;
+}
+
 // ---- perch bench train ----
 
 // The physics before issue 19 (docs/env.md): Bullet's infinite floor bounds, its 4096-entry
@@ -875,6 +954,19 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   t->add_option("--metrics-port", tf->metrics_port, "Prometheus /metrics port");
   t->callback([tf] {
     const int rc = RunTrain(*tf);
+    if (rc != 0) throw CLI::RuntimeError(rc);
+  });
+
+  // perch bench flow
+  auto ff = std::make_shared<BenchFlowFlags>();
+  CLI::App* fl = bench.add_subcommand(
+      "flow", "Flow control: stale drops, learner samples/s and actor CPU with and without credit");
+  fl->add_option("--config", ff->config, "experiment config (default: the mock env)");
+  fl->add_option("--actors", ff->actors, "actor process counts, e.g. 1,4,16")->delimiter(',');
+  fl->add_option("--seconds", ff->seconds, "duration of each run");
+  fl->add_flag("--json", ff->json, "print one JSON object");
+  fl->callback([ff] {
+    const int rc = RunBenchFlow(*ff);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });
 

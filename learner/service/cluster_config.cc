@@ -26,7 +26,9 @@ Json ToJson(const ClusterConfig& c) {
               {"init_from", c.init_from},
               {"max_samples", c.max_samples},
               {"target_success", c.target_success},
-              {"target_window", c.target_window}};
+              {"target_window", c.target_window},
+              {"credit_slack", c.credit_slack},
+              {"credit_regrant_s", c.credit_regrant_s}};
 }
 
 namespace {
@@ -45,7 +47,7 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
        "milestone_every", "heartbeat_s", "actor_timeout_s", "max_message_bytes",
        "max_segment_steps", "max_wire_value", "reconnect_ivl_ms", "hierarchy_meta_period", "hierarchy_enabled",
        "restart_backoff_ms", "learner_queue_segments", "init_from", "max_samples",
-       "target_success", "target_window"},
+       "target_success", "target_window", "credit_slack", "credit_regrant_s"},
       ctx);
   ClusterConfig c;
   GetOptional(j, "task", c.task, ctx);
@@ -69,6 +71,8 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "max_samples", c.max_samples, ctx);
   GetOptional(j, "target_success", c.target_success, ctx);
   GetOptional(j, "target_window", c.target_window, ctx);
+  GetOptional(j, "credit_slack", c.credit_slack, ctx);
+  GetOptional(j, "credit_regrant_s", c.credit_regrant_s, ctx);
   c.task = TaskName(TaskFromName(c.task, ctx + ".task"));  // one spelling from here on
   CheckMin(ctx, "segment_steps", c.segment_steps, 1);
   CheckMin(ctx, "envs_per_actor", c.envs_per_actor, 1);
@@ -92,6 +96,10 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
     throw ConfigError(ctx + ".target_success: must be in [0, 1] (0: no target)");
   }
   CheckMin(ctx, "target_window", c.target_window, 1);
+  if (!(c.credit_slack >= 0.0 && c.credit_slack <= 100.0)) {
+    throw ConfigError(ctx + ".credit_slack: must be in [0, 100] (0: no flow control)");
+  }
+  CheckMin(ctx, "credit_regrant_s", c.credit_regrant_s, 0.01);
   if (c.segment_steps > c.max_segment_steps) {
     throw ConfigError(ctx + ".segment_steps: " + std::to_string(c.segment_steps) +
                       " exceeds max_segment_steps " + std::to_string(c.max_segment_steps));

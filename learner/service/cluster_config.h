@@ -44,6 +44,16 @@ struct ClusterConfig {
   int64_t max_samples = 0;
   double target_success = 0.0;
   int target_window = 200;
+  // Flow control (ours, issue 20). With each weights version the learner grants every actor a
+  // number of segments it may send stamped with that version: what the next batch still needs,
+  // times (1 + credit_slack), shared among the live actors. An actor that has used its credit
+  // waits (no stepping, no CPU) for the next version, so actors faster than the learner make no
+  // samples that would go stale. Slack lets unevenly fast actors fill a batch without waiting for
+  // each other; its surplus is trained on in the next batch (policy lag 1). 0: no credit (actors
+  // never wait). A learner that has heard no segment for credit_regrant_s while its batch is not
+  // full grants again (an actor that left took its credit with it).
+  double credit_slack = 1.0;
+  double credit_regrant_s = 0.25;
 };
 
 Json ToJson(const ClusterConfig& c);

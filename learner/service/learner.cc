@@ -4,6 +4,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -298,6 +299,8 @@ void LearnerService::Publish(bool republish) {
     proto::Weights* w = m.mutable_weights();
     w->set_version(version());
     w->set_run_id(run_id_);
+    w->set_credit_segments(credit_segments_);
+    w->set_credit_epoch(credit_epoch_);
     proto::TaskPolicy* tp = w->add_policies();
     tp->set_task(task_);
     ppo_->ExportWeights(tp->mutable_model());
@@ -334,6 +337,7 @@ void LearnerService::HandleRollout(const zmq::message_t& msg) {
     case proto::ActorMessage::kHello:
       ++stats_.hellos;
       actor_last_seen_[m.hello().actor_instance()] = now;
+      credit_pending_ = setup_.cluster.credit_slack > 0;  // the share per actor changed
       spdlog::info("learner: actor {} ({}, {} envs of {}) joined", m.hello().actor_id(),
                    m.hello().hostname(), m.hello().num_envs(), m.hello().env_name());
       break;
@@ -388,6 +392,8 @@ bool LearnerService::HandleSegment(const proto::Segment& seg) {
   counters_.set_segments(counters_.segments() + 1);
   batch_lag_sum_ += static_cast<double>(v - r.policy_version);
   ++batch_segments_;
+  last_segment_s_ = MonotonicSeconds();
+  if (r.policy_version == v && granted_version_ == v) ++segments_at_version_;
   batch_samples_ += r.size();
   batch_.push_back(std::move(r));
   return true;
@@ -436,7 +442,6 @@ void LearnerService::Train() {
   }
   counters_.set_updates(counters_.updates() + 1);
   counters_.set_samples(counters_.samples() + batch_samples_);
-  Publish(false);
   const double now = MonotonicSeconds();
   if (progress_) progress_->OnUpdate(counters_.samples(), now);
   const double window = now - last_update_s_;
@@ -454,7 +459,57 @@ void LearnerService::Train() {
   batch_terminated_ = 0;
   batch_judged_ = 0;
   batch_succeeded_ = 0;
+  // What arrived while training (stamped with the old version: lag 1 now) starts the next batch,
+  // and the new credit counts it (flow control).
+  DrainRollouts();
+  GrantCredit();
   if (counters_.updates() % setup_.cluster.checkpoint_every == 0) SaveCheckpoint();
+}
+
+void LearnerService::DrainRollouts() {
+  zmq::message_t msg;
+  while (batch_samples_ < static_cast<uint64_t>(setup_.ppo.steps_per_update) &&
+         rollout_sock_.recv(msg, zmq::recv_flags::dontwait)) {
+    HandleRollout(msg);
+  }
+}
+
+// The grant is a total per actor for the current version: an even share of what was already
+// received at this version plus what the batch still needs, times (1 + slack). Recomputed when
+// actors join and when the batch stalls, it then grows by the share still needed.
+double LearnerService::CreditPerActor() const {
+  if (setup_.cluster.credit_slack <= 0) return 0.0;  // no flow control
+  const int alive = ActorsAlive();
+  if (alive == 0) return 1.0;  // nobody known yet: the first hellos bring a real grant
+  const double need = std::max(
+      0.0, static_cast<double>(setup_.ppo.steps_per_update) - static_cast<double>(batch_samples_));
+  const double segments = static_cast<double>(segments_at_version_) +
+                          need * (1.0 + setup_.cluster.credit_slack) / setup_.cluster.segment_steps;
+  // Never 0 (that reads "no limit"): a full batch still lets each actor finish a little.
+  return std::clamp(segments / alive, 1e-3, 1e6);
+}
+
+void LearnerService::GrantCredit(bool stalled) {
+  const double before = credit_segments_;
+  const bool same_version = granted_version_ == version();
+  if (!same_version) {
+    granted_version_ = version();
+    segments_at_version_ = 0;
+  }
+  credit_pending_ = false;
+  credit_segments_ = CreditPerActor();
+  if (stalled && same_version && before > 0) {
+    // The even share of what arrived may already be spent by the live actors (a departed actor
+    // made part of it): grow every actor's total by its share of what is still needed.
+    const double need = std::max(0.0, static_cast<double>(setup_.ppo.steps_per_update) -
+                                          static_cast<double>(batch_samples_));
+    const double more = need * (1.0 + setup_.cluster.credit_slack) /
+                        (std::max(1, ActorsAlive()) * setup_.cluster.segment_steps);
+    credit_segments_ = std::max(credit_segments_, std::min(1e6, before + std::max(1.0, more)));
+  }
+  ++credit_epoch_;
+  last_grant_s_ = MonotonicSeconds();
+  Publish(false);
 }
 
 void LearnerService::WriteMetrics(const UpdateStats& u, double update_s, uint64_t samples) {
@@ -473,6 +528,8 @@ void LearnerService::WriteMetrics(const UpdateStats& u, double update_s, uint64_
       {"return_mean", batch_returns_.empty() ? Json(nullptr) : Json(Mean(batch_returns_))},
       {"episode_length_mean", batch_lengths_.empty() ? Json(nullptr) : Json(Mean(batch_lengths_))},
       {"dropped_stale", counters_.dropped_stale()},
+      {"segments", counters_.segments()},
+      {"credit_segments", credit_segments_},
       {"rejected", counters_.rejected()},
       {"actors", ActorsAlive()},
       {"wire_bytes_per_sample",
@@ -521,6 +578,10 @@ void LearnerService::UpdateGauges() {
   m.Set("perch_weights_republished_total", stats_.weights_republished,
         "weights resent to (re)subscribing actors", "counter");
   m.Set("perch_weights_version", static_cast<double>(version()), "published weights version");
+  m.Set("perch_credit_segments", credit_segments_,
+        "segments each actor may send per weights version (0: no flow control)");
+  m.Set("perch_credit_regrants_total", stats_.credit_regrants,
+        "fresh credit grants because the batch stopped filling", "counter");
   m.Set("perch_nonfinite_updates_total", static_cast<double>(nonfinite_updates_),
         "PPO updates discarded because they left a non-finite weight or statistic", "counter");
 }
@@ -535,7 +596,7 @@ void LearnerService::Run() {
   pc.control_dt = setup_.control_dt;
   progress_ = std::make_unique<RunProgress>(pc, counters_.samples(), start_s_);
   stop_reason_ = "stopped";
-  Publish(false);
+  GrantCredit();
   UpdateGauges();
   zmq::pollitem_t items[] = {{rollout_sock_.handle(), 0, ZMQ_POLLIN, 0},
                              {weights_sock_.handle(), 0, ZMQ_POLLIN, 0}};
@@ -586,8 +647,24 @@ void LearnerService::Run() {
         HandleRollout(msg);
       }
     }
-    if (batch_samples_ >= static_cast<uint64_t>(setup_.ppo.steps_per_update)) Train();
+    // A drain after an update may fill the next batch at once: train it now, not after a poll.
+    while (batch_samples_ >= static_cast<uint64_t>(setup_.ppo.steps_per_update) && !stopping() &&
+           (options_.max_updates == 0 ||
+            counters_.updates() < static_cast<uint64_t>(options_.max_updates))) {
+      Train();
+    }
     const double now = MonotonicSeconds();
+    // Flow control: a batch that stopped filling (an actor left with its credit, or the actors
+    // counted alive are fewer than the grant assumed) gets a fresh grant.
+    if (setup_.cluster.credit_slack > 0) {
+      if (now - std::max(last_segment_s_, last_grant_s_) >= setup_.cluster.credit_regrant_s) {
+        ++stats_.credit_regrants;
+        GrantCredit(/*stalled=*/true);
+      } else if (credit_pending_ &&
+                 now - last_grant_s_ >= options_.republish_min_interval_s) {
+        GrantCredit();  // actors joined; a flood of hellos costs one grant per interval
+      }
+    }
     if (now - last_gauges >= 1.0) {
       UpdateGauges();
       last_gauges = now;

@@ -61,6 +61,7 @@ struct LearnerStats {
   uint64_t end_pose_batches = 0;
   uint64_t weights_published = 0;
   uint64_t weights_republished = 0;                  // to late joiners / reconnecting actors
+  uint64_t credit_regrants = 0;                      // flow control: grants for a stalled batch
   std::map<std::string, uint64_t> rejected_by_kind;  // WireRejectName -> count
 };
 
@@ -91,6 +92,11 @@ class LearnerService {
   void Reject(WireReject kind, const std::string& why);
   void Publish(bool republish);
   void Train();
+  void DrainRollouts();            // queued segments into the batch, up to a full batch
+  double CreditPerActor() const;  // cluster.credit_slack: segments per actor for this version
+  // A new grant, published with the weights; stalled: the batch stopped filling, so the grant
+  // must grow.
+  void GrantCredit(bool stalled = false);
   void WriteMetrics(const UpdateStats& u, double dt_s, uint64_t batch_samples);
   void UpdateGauges();
   int ActorsAlive() const;
@@ -134,6 +140,13 @@ class LearnerService {
   double start_s_ = 0.0;
   double last_update_s_ = 0.0;
   double last_republish_s_ = -1e9;
+  double credit_segments_ = 0.0;
+  uint64_t credit_epoch_ = 0;
+  uint64_t granted_version_ = ~uint64_t{0};
+  uint64_t segments_at_version_ = 0;  // accepted segments stamped with the granted version
+  bool credit_pending_ = false;       // actors joined since the last grant
+  double last_grant_s_ = 0.0;
+  double last_segment_s_ = 0.0;
   bool republish_pending_ = false;
   double train_time_base_s_ = 0.0;
   int64_t last_checkpoint_update_ = -1;

@@ -26,6 +26,9 @@ using namespace testing_util;
 struct InprocRun {
   std::vector<Json> rows;
   uint64_t actor_segments = 0;
+  uint64_t actor_credit_waits = 0;
+  uint64_t learner_segments = 0;
+  uint64_t learner_stale = 0;
   uint64_t actor_weights_loaded = 0;
   uint64_t learner_updates = 0;
 };
@@ -40,8 +43,7 @@ LearnerOptions InprocOptions(const std::string& tag, const std::string& run_dir)
 }
 
 InprocRun RunInproc(const std::string& tag, int updates, int num_actors,
-                    std::string* run_dir_out = nullptr) {
-  const Json j = MockConfig();
+                    std::string* run_dir_out = nullptr, const Json& j = MockConfig()) {
   const ExperimentConfig cfg = ExperimentConfigFromJson(j, "inproc");
   const LearnerSetup ls = MakeLearnerSetup(cfg);
   LearnerOptions lo = InprocOptions(tag, TempDir("inproc") + "/run");
@@ -70,8 +72,11 @@ InprocRun RunInproc(const std::string& tag, int updates, int num_actors,
   InprocRun out;
   out.rows = ReadMetrics(lo.run_dir);
   out.learner_updates = learner.counters().updates();
+  out.learner_segments = learner.counters().segments();
+  out.learner_stale = learner.counters().dropped_stale();
   for (auto& a : actors) {
     out.actor_segments += a->counters().segments_sent;
+    out.actor_credit_waits += a->counters().credit_waits;
     out.actor_weights_loaded += a->counters().weights_loaded;
   }
   return out;
@@ -114,6 +119,31 @@ TEST(InprocTest, LearnerAndTwoActorsInOneProcessLearnTheMockTask) {
     }
   }
   EXPECT_GT(falls, 0);
+}
+
+// Flow control (issue 20): actors far faster than the learner (mock env; 40 epochs per update)
+// make only what the learner uses. Without credit they run ahead and their surplus goes stale.
+TEST(InprocTest, CreditKeepsFastActorsFromMakingStaleSegments) {
+  auto run = [](const std::string& tag, double slack) {
+    Json j = MockConfig(Json{{"credit_slack", slack}, {"max_policy_lag", 1},
+                             {"learner_queue_segments", 64}});
+    j["ppo"]["num_epochs"] = 40;
+    return RunInproc(tag, 12, 6, nullptr, j);
+  };
+  const InprocRun on = run("credit-on", 1.0);
+  ASSERT_EQ(on.learner_updates, 12u);
+  EXPECT_GT(on.actor_credit_waits, 0u);  // the actors did wait
+  const double drop_on =
+      static_cast<double>(on.learner_stale) / (on.learner_segments + on.learner_stale);
+  EXPECT_LE(drop_on, 0.05) << on.learner_stale << " stale of " << on.learner_segments;
+  // What the actors sent was used or is the last version's surplus (at most one batch with
+  // slack 1: 2 x 512 samples / 64 per segment), not a growing backlog.
+  EXPECT_LE(on.actor_segments, on.learner_segments + on.learner_stale + 2 * 512 / 64 + 6 * 2);
+
+  const InprocRun off = run("credit-off", 0.0);
+  ASSERT_EQ(off.learner_updates, 12u);
+  EXPECT_EQ(off.actor_credit_waits, 0u);
+  EXPECT_GT(off.actor_segments, on.actor_segments);  // ran ahead
 }
 
 TEST(InprocTest, ObservationStatisticsCountEachSampleOnce) {

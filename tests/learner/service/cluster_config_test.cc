@@ -36,6 +36,21 @@ TEST(ClusterConfigTest, ErrorsNameFileAndField) {
   EXPECT_EQ(ErrorOf({{"segment_steps", 64}, {"task", "sit"}}), "");
 }
 
+TEST(ClusterConfigTest, CreditFieldsAreCheckedByName) {
+  const ClusterConfig d = ClusterConfigFromJson(Json::object(), "cluster");
+  EXPECT_EQ(d.credit_slack, 1.0);  // flow control on by default
+  EXPECT_EQ(ClusterConfigFromJson(Json{{"credit_slack", 0}}, "cluster").credit_slack, 0.0);
+  for (const Json& bad : {Json{{"credit_slack", -0.5}}, Json{{"credit_slack", 1e9}},
+                          Json{{"credit_regrant_s", 0}}, Json{{"credit_slack", "lots"}}}) {
+    try {
+      ClusterConfigFromJson(bad, "cluster");
+      FAIL() << bad.dump();
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find("cluster.credit_"), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST(ClusterConfigTest, TaskNamesRoundTrip) {
   for (const char* n : {"walk", "turn_left", "turn_right", "sit", "meta", "stand"}) {
     EXPECT_EQ(TaskName(TaskFromName(n, "t")), n);
