@@ -319,7 +319,7 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
       float gn;
       if (ppo_.threads > 1) {
         lt = ShardedLoss(begin, b, shards, params);
-        gn = shards > 1 ? ShardedStep() : SerialStep(&shards_[0].grad);
+        gn = shards > 1 ? ShardedStep() : PooledStep(&shards_[0].grad);
       } else {
         mb_obs_.resize(obs_dim, b);
         mb_act_.resize(act_size, b);
@@ -401,7 +401,7 @@ PpoLossTerms PpoLearner::ShardedLoss(int begin, int b, int shards, const float* 
     *lo = begin + static_cast<int>(static_cast<int64_t>(s) * b / shards);
     *bs = begin + static_cast<int>(static_cast<int64_t>(s + 1) * b / shards) - *lo;
   };
-  pool_->Run(shards, [&](int s) {
+  for (int s = 0; s < shards; ++s) {
     Shard& sh = shards_[s];
     int lo, bs;
     bounds(s, &lo, &bs);
@@ -411,7 +411,14 @@ PpoLossTerms PpoLearner::ShardedLoss(int begin, int b, int shards, const float* 
     sh.value.resize(bs);
     sh.adv.resize(bs);
     sh.ret.resize(bs);
-    for (int k = 0; k < bs; ++k) {
+  }
+  // Gather: two threads per part, each copying half of its columns (disjoint writes).
+  pool_->Run(2 * shards, [&](int t) {
+    Shard& sh = shards_[t / 2];
+    int lo, bs;
+    bounds(t / 2, &lo, &bs);
+    const int k0 = t % 2 == 0 ? 0 : bs / 2, k1 = t % 2 == 0 ? bs / 2 : bs;
+    for (int k = k0; k < k1; ++k) {
       const int idx = perm_[lo + k];
       sh.obs.col(k) = obs_.col(idx);
       sh.act.col(k) = actions_.col(idx);
@@ -420,6 +427,9 @@ PpoLossTerms PpoLearner::ShardedLoss(int begin, int b, int shards, const float* 
       sh.adv[k] = adv_[idx];
       sh.ret[k] = ret_[idx];
     }
+  });
+  pool_->Run(shards, [&](int s) {
+    Shard& sh = shards_[s];
     if (normalize && shards == 1) {
       // The one-thread path's expressions, for the same bits.
       const float mean = sh.adv.mean();
@@ -462,6 +472,37 @@ PpoLossTerms PpoLearner::ShardedLoss(int begin, int b, int shards, const float* 
     t.clip_fraction += u.clip_fraction;
   }
   return t;
+}
+
+// SerialStep's arithmetic on two threads: the element-wise parts (mask, clip scale, Adam) on two
+// halves of the parameters split at a multiple of 64 elements, the norm on one thread as before.
+float PpoLearner::PooledStep(VectorXf* grad) {
+  VectorXf& g = *grad;
+  const int np = model_.num_params();
+  const int split = (np / 2) & ~63;
+  if (split == 0) return SerialStep(grad);
+  const VectorXf& mask = model_.trainable_mask();
+  auto half = [&](int r, int* lo, int* n) {
+    *lo = r == 0 ? 0 : split;
+    *n = r == 0 ? split : np - split;
+  };
+  pool_->Run(2, [&](int r) {
+    int lo, n;
+    half(r, &lo, &n);
+    g.segment(lo, n).array() *= mask.segment(lo, n).array();
+  });
+  const float gn = g.norm();
+  const float scale =
+      ppo_.max_grad_norm > 0 && gn > ppo_.max_grad_norm ? ppo_.max_grad_norm / gn : 1.0f;
+  const float lr_t = adam_.BeginStep(ppo_.learning_rate);
+  float* params = model_.params().data();
+  pool_->Run(2, [&](int r) {
+    int lo, n;
+    half(r, &lo, &n);
+    if (scale != 1.0f) g.segment(lo, n) *= scale;
+    adam_.ApplyRange(params, g.data(), lr_t, lo, lo + n);
+  });
+  return gn;
 }
 
 // Mask, global-norm clip and the Adam step on one gradient, as the one-thread update does.

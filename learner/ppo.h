@@ -171,6 +171,7 @@ class PpoLearner {
   PpoLossTerms ShardedLoss(int begin, int b, int shards, const float* params);
   float ShardedStep();
   float SerialStep(VectorXf* grad);
+  float PooledStep(VectorXf* grad);
   int active_shards_ = 0;
   std::vector<double> range_sq_;
   std::vector<Shard> shards_;

@@ -119,6 +119,20 @@ TEST(PpoUpdateTest, ThreadsMatchOneThread) {
   }
 }
 
+TEST(PpoUpdateTest, TwoThreadsAreBitIdenticalAtTheWalkersSize) {
+  auto run = [](int threads) {
+    PpoConfig cfg;
+    cfg.num_minibatches = 4;
+    cfg.num_epochs = 2;
+    cfg.threads = threads;
+    PpoLearner learner(PolicyConfig::Subtask(52), cfg, 11);
+    learner.Update({Acted(learner, 700, 4), Acted(learner, 324, 5)});
+    return VectorXf(learner.model().params());
+  };
+  const VectorXf p1 = run(1), p2 = run(2);
+  EXPECT_TRUE(p1 == p2) << (p1 - p2).cwiseAbs().maxCoeff();
+}
+
 TEST(PpoUpdateTest, PartsOfAMinibatchAddUpToTheWhole) {
   PpoConfig cfg;
   PpoLearner learner(PolicyConfig::Subtask(9), cfg, 5);
