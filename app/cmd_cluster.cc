@@ -674,9 +674,8 @@ int RunBenchFlow(const BenchFlowFlags& f) {
   LogToStderr("bench");
   InstallStopHandlers();
   const Json base = LoadComposedConfig(f.config);
-  const double slack_on = LoadExperimentConfig(f.config).cluster.credit_slack > 0
-                              ? LoadExperimentConfig(f.config).cluster.credit_slack
-                              : 1.0;
+  const double slack = LoadExperimentConfig(f.config).cluster.credit_slack;
+  const double slack_on = slack > 0 ? slack : 1.0;  // a config with credit off: the default
   Json runs = Json::array();
   bool ok = true;
   for (int n : f.actors) {

@@ -321,29 +321,12 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
         lt = ShardedLoss(begin, b, shards, params);
         gn = shards > 1 ? ShardedStep() : PooledStep(&shards_[0].grad);
       } else {
-        mb_obs_.resize(obs_dim, b);
-        mb_act_.resize(act_size, b);
-        mb_logp_.resize(b);
-        mb_value_.resize(b);
-        mb_adv_.resize(b);
-        mb_ret_.resize(b);
-        for (int k = 0; k < b; ++k) {
-          const int idx = perm_[begin + k];
-          mb_obs_.col(k) = obs_.col(idx);
-          mb_act_.col(k) = actions_.col(idx);
-          mb_logp_[k] = old_logp_[idx];
-          mb_value_[k] = old_value_[idx];
-          mb_adv_[k] = adv_[idx];
-          mb_ret_[k] = ret_[idx];
-        }
-        if (ppo_.normalize_advantages && b > 1) {
-          const float mean = mb_adv_.mean();
-          const float sd = std::sqrt((mb_adv_.array() - mean).square().mean());
-          mb_adv_.array() = (mb_adv_.array() - mean) / (sd + ppo_.advantage_eps);
-        }
+        ResizeShard(&mb_, b);
+        GatherColumns(&mb_, begin, 0, b);
+        if (ppo_.normalize_advantages && b > 1) NormalizeAdvantages(&mb_.adv);
         grad_.setZero();
-        lt = PpoLoss(model_, params, ppo_, mb_obs_, mb_act_, mb_logp_, mb_value_, mb_adv_,
-                     mb_ret_, &ws_, grad_.data());
+        lt = PpoLoss(model_, params, ppo_, mb_.obs, mb_.act, mb_.logp, mb_.value, mb_.adv, mb_.ret,
+                     &ws_, grad_.data());
         gn = SerialStep(&grad_);
       }
       params = model_.params().data();
@@ -370,6 +353,33 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
   return st;
 }
 
+void PpoLearner::ResizeShard(Shard* sh, int bs) const {
+  sh->obs.resize(model_.obs_dim(), bs);
+  sh->act.resize(model_.action_size(), bs);
+  sh->logp.resize(bs);
+  sh->value.resize(bs);
+  sh->adv.resize(bs);
+  sh->ret.resize(bs);
+}
+
+void PpoLearner::GatherColumns(Shard* sh, int lo, int k0, int k1) const {
+  for (int k = k0; k < k1; ++k) {
+    const int idx = perm_[lo + k];
+    sh->obs.col(k) = obs_.col(idx);
+    sh->act.col(k) = actions_.col(idx);
+    sh->logp[k] = old_logp_[idx];
+    sh->value[k] = old_value_[idx];
+    sh->adv[k] = adv_[idx];
+    sh->ret[k] = ret_[idx];
+  }
+}
+
+void PpoLearner::NormalizeAdvantages(VectorXf* adv) const {
+  const float mean = adv->mean();
+  const float sd = std::sqrt((adv->array() - mean).square().mean());
+  adv->array() = (adv->array() - mean) / (sd + ppo_.advantage_eps);
+}
+
 // One minibatch [begin, begin + b) of perm_ on ppo.threads threads: split into `shards` contiguous
 // parts, and each part's policy and value networks (independent: disjoint weights and gradients)
 // run on threads of their own. Each part adds its share of the minibatch-mean loss gradient
@@ -380,8 +390,6 @@ PpoLossTerms PpoLearner::ShardedLoss(int begin, int b, int shards, const float* 
   if (!pool_ || pool_->threads() != ppo_.threads) pool_ = std::make_shared<WorkerPool>(ppo_.threads);
   if (static_cast<int>(shards_.size()) < shards) shards_.resize(shards);
   active_shards_ = shards;
-  const int obs_dim = model_.obs_dim();
-  const int act_size = model_.action_size();
   const bool normalize = ppo_.normalize_advantages && b > 1;
   // Several parts: advantages normalised over the whole minibatch, as one thread does.
   float adv_mean = 0.0f, adv_scale = 1.0f;
@@ -402,39 +410,21 @@ PpoLossTerms PpoLearner::ShardedLoss(int begin, int b, int shards, const float* 
     *bs = begin + static_cast<int>(static_cast<int64_t>(s + 1) * b / shards) - *lo;
   };
   for (int s = 0; s < shards; ++s) {
-    Shard& sh = shards_[s];
     int lo, bs;
     bounds(s, &lo, &bs);
-    sh.obs.resize(obs_dim, bs);
-    sh.act.resize(act_size, bs);
-    sh.logp.resize(bs);
-    sh.value.resize(bs);
-    sh.adv.resize(bs);
-    sh.ret.resize(bs);
+    ResizeShard(&shards_[s], bs);
   }
   // Gather: two threads per part, each copying half of its columns (disjoint writes).
   pool_->Run(2 * shards, [&](int t) {
     Shard& sh = shards_[t / 2];
     int lo, bs;
     bounds(t / 2, &lo, &bs);
-    const int k0 = t % 2 == 0 ? 0 : bs / 2, k1 = t % 2 == 0 ? bs / 2 : bs;
-    for (int k = k0; k < k1; ++k) {
-      const int idx = perm_[lo + k];
-      sh.obs.col(k) = obs_.col(idx);
-      sh.act.col(k) = actions_.col(idx);
-      sh.logp[k] = old_logp_[idx];
-      sh.value[k] = old_value_[idx];
-      sh.adv[k] = adv_[idx];
-      sh.ret[k] = ret_[idx];
-    }
+    GatherColumns(&sh, lo, t % 2 == 0 ? 0 : bs / 2, t % 2 == 0 ? bs / 2 : bs);
   });
   pool_->Run(shards, [&](int s) {
     Shard& sh = shards_[s];
     if (normalize && shards == 1) {
-      // The one-thread path's expressions, for the same bits.
-      const float mean = sh.adv.mean();
-      const float sd = std::sqrt((sh.adv.array() - mean).square().mean());
-      sh.adv.array() = (sh.adv.array() - mean) / (sd + ppo_.advantage_eps);
+      NormalizeAdvantages(&sh.adv);  // as the one-thread path, for the same bits
     } else if (normalize) {
       sh.adv.array() = (sh.adv.array() - adv_mean) * adv_scale;
     }

@@ -155,19 +155,21 @@ class PpoLearner {
   MatrixXf obs_, actions_;  // [obs_dim x N], [action_size x N]
   VectorXf old_logp_, old_value_, adv_, ret_;
   std::vector<int> perm_;
-  MatrixXf mb_obs_, mb_act_;
-  VectorXf mb_logp_, mb_value_, mb_adv_, mb_ret_;
-  VectorXf grad_;
-  PpoLossWorkspace ws_;
-  std::vector<float> scaled_rewards_, seg_adv_, seg_ret_;
-
-  // ppo.threads > 1: one part of each minibatch per thread.
+  // A minibatch, or with ppo.threads > 1 one part of it per pair of threads.
   struct Shard {
     MatrixXf obs, act;
     VectorXf logp, value, adv, ret, grad;
     PpoLossWorkspace ws;
     PpoLossTerms terms;
   };
+  Shard mb_;  // the one-thread path's minibatch
+  VectorXf grad_;
+  PpoLossWorkspace ws_;
+  std::vector<float> scaled_rewards_, seg_adv_, seg_ret_;
+
+  void ResizeShard(Shard* sh, int bs) const;
+  void GatherColumns(Shard* sh, int lo, int k0, int k1) const;  // columns [k0, k1) of perm_[lo..]
+  void NormalizeAdvantages(VectorXf* adv) const;  // (A - mean) / (std + eps) over the vector
   PpoLossTerms ShardedLoss(int begin, int b, int shards, const float* params);
   float ShardedStep();
   float SerialStep(VectorXf* grad);
