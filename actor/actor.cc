@@ -22,14 +22,17 @@ ActorService::ActorService(zmq::context_t& ctx, const ActorSetup& setup,
       sub_(ctx, zmq::socket_type::sub),
       runner_(setup.policy, setup.obs_norm),
       // Same seed and actor id -> same stream of actions and env episodes.
-      rng_(setup.seed * 0x9E3779B97F4A7C15ULL + options.actor_id + 1) {
+      rng_(setup.seed * 0x9E3779B97F4A7C15ULL + options.actor_id + 1),
+      lag_rng_(setup.seed * 0xD1B54A32D192ED03ULL + options.actor_id + 7) {
   if (options_.num_envs < 1) throw ConfigError("--envs: must be >= 1");
   // An identifier of this process start (not used for any result).
   Rng id_rng(static_cast<uint64_t>(MonotonicSeconds() * 1e9) ^
              (static_cast<uint64_t>(::getpid()) << 20) ^ options.actor_id);
   instance_ = id_rng.NextU64();
   credit_carry_ = id_rng.Uniform();  // flow control: actors on fractional grants take turns
-  for (int i = 0; i < options_.num_envs; ++i) {
+  if (options_.replay && options_.replay->empty())
+    throw ConfigError("actor: no segments to replay");
+  for (int i = 0; i < options_.num_envs && !options_.replay; ++i) {
     envs_.push_back(setup_.make_env());
     Env* env = envs_.back().get();
     if (env->spec().obs_dim != setup_.policy.obs_dim) {
@@ -82,9 +85,9 @@ void ActorService::SendHello() {
   ::gethostname(host, sizeof(host) - 1);
   h->set_hostname(host);
   h->set_num_envs(options_.num_envs);
-  h->set_env_name(envs_[0]->spec().name);
-  h->set_obs_dim(envs_[0]->spec().obs_dim);
-  h->set_act_dim(envs_[0]->spec().act_dim);
+  h->set_env_name(spec().name);
+  h->set_obs_dim(spec().obs_dim);
+  h->set_act_dim(spec().act_dim);
   Send(m.SerializeAsString());
 }
 
@@ -151,6 +154,8 @@ bool ActorService::PollWeights(int timeout_ms) {
     return false;
   }
   while (sub_.recv(msg, zmq::recv_flags::dontwait)) {
+    ++counters_.weights_messages;
+    counters_.weights_bytes += msg.size();
     newest.move(msg);
     got = true;
   }
@@ -182,6 +187,13 @@ bool ActorService::PollWeights(int timeout_ms) {
       spdlog::info("actor {}: learner run changed, now at version {}", options_.actor_id,
                    w.version());
     }
+    if (setup_.cluster.simulated_lag > 0) {
+      if (w.run_id() != weights_run_id_) lag_history_.clear();
+      lag_history_.push_front(runner_);
+      while (lag_history_.size() > static_cast<size_t>(setup_.cluster.simulated_lag) + 1) {
+        lag_history_.pop_back();
+      }
+    }
     weights_run_id_ = w.run_id();
     have_weights_ = true;
     ++counters_.weights_loaded;
@@ -191,6 +203,29 @@ bool ActorService::PollWeights(int timeout_ms) {
   ++counters_.weights_rejected;
   spdlog::error("actor {}: weights hold no policy for task {}", options_.actor_id, TaskName(task_));
   return false;
+}
+
+void ActorService::Produce(size_t i, PolicyRunner* runner, Rollout* out, EpisodeStats* eps) {
+  if (!options_.replay) {
+    const std::vector<PolicyRunner*> no_subtasks;
+    collectors_[i]->Collect(runner, no_subtasks, rng_, setup_.cluster.segment_steps, out, eps);
+    return;
+  }
+  const RecordedSegment& rec = (*options_.replay)[replay_next_++ % options_.replay->size()];
+  *out = rec.rollout;
+  out->policy_version = runner->version();
+  out->stream_id = (uint64_t{options_.actor_id} << 20) | static_cast<uint64_t>(i);
+  *eps = rec.episodes;
+  if (options_.replay_samples_per_s > 0) {
+    // Paced like an actor core that makes replay_samples_per_s; heartbeats and weights meanwhile.
+    const double now = MonotonicSeconds();
+    replay_due_s_ =
+        std::max(replay_due_s_, now - 1.0) + out->size() / options_.replay_samples_per_s;
+    while (!Stopping() && MonotonicSeconds() < replay_due_s_) {
+      PollWeights(static_cast<int>(std::ceil(1e3 * (replay_due_s_ - MonotonicSeconds()))));
+      MaybeHeartbeat();
+    }
+  }
 }
 
 void ActorService::Run() {
@@ -210,20 +245,24 @@ void ActorService::Run() {
     spdlog::info("actor {}: {} envs, weights version {}", options_.actor_id, options_.num_envs,
                  runner_.version());
   }
-  std::vector<Rollout> rollouts(envs_.size());
+  const size_t streams = options_.replay ? static_cast<size_t>(options_.num_envs) : envs_.size();
+  std::vector<Rollout> rollouts(streams);
   proto::ActorMessage m;
   m.set_wire_version(proto::WIRE_VERSION_CURRENT);
-  std::vector<uint64_t> segment_index(envs_.size(), 0);
-  const std::vector<PolicyRunner*> no_subtasks;
+  std::vector<uint64_t> segment_index(streams, 0);
   for (int64_t seg = 0; !Stopping() && (options_.max_segments == 0 || seg < options_.max_segments);
        ++seg) {
     // One segment per env with the same weights, then take new weights (between segments).
-    for (size_t i = 0; i < envs_.size() && !Stopping(); ++i) {
+    for (size_t i = 0; i < streams && !Stopping(); ++i) {
       WaitForCredit();
       if (Stopping()) break;
       EpisodeStats eps;
-      collectors_[i]->Collect(&runner_, no_subtasks, rng_, setup_.cluster.segment_steps,
-                              &rollouts[i], &eps);
+      PolicyRunner* runner = &runner_;
+      if (!lag_history_.empty()) {
+        runner = &lag_history_[lag_rng_.UniformInt(lag_history_.size())];
+      }
+      Produce(i, runner, &rollouts[i], &eps);
+      if (Stopping()) break;
       counters_.env_steps += rollouts[i].size();
       counters_.episodes += eps.returns.size();
       proto::Segment* s = m.mutable_segment();
@@ -235,10 +274,11 @@ void ActorService::Run() {
       s->set_task(task_);
       proto::PolicyVersion* pv = s->add_policy_versions();
       pv->set_task(task_);
-      pv->set_version(runner_.version());
+      // (runner may be gone: replay pacing takes new weights, which can drop the oldest runner)
+      pv->set_version(rollouts[i].policy_version);
       rollouts[i].ToProto(s->mutable_rollout());
       // Episodes ended, in order, at the steps flagged terminated or truncated.
-      const bool has_success = envs_[i]->spec().has_success;
+      const bool has_success = spec().has_success;
       size_t e = 0;
       const Rollout& r = rollouts[i];
       for (int t = 0; t < r.size() && e < eps.returns.size(); ++t) {

@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <memory>
 #include <string>
@@ -30,6 +31,12 @@ struct ActorSetup {
   std::function<std::unique_ptr<Env>()> make_env;
 };
 
+// A segment recorded from a real env, for actors that replay instead of stepping (bench scale).
+struct RecordedSegment {
+  Rollout rollout;
+  EpisodeStats episodes;  // of the episodes that ended in it
+};
+
 struct ActorOptions {
   std::string rollout_connect = "tcp://127.0.0.1:5555";
   std::string weights_connect = "tcp://127.0.0.1:5556";
@@ -37,6 +44,12 @@ struct ActorOptions {
   int num_envs = 4;
   int64_t max_segments = 0;  // per env; 0: until stopped (tests and benchmarks bound it)
   const std::atomic<bool>* stop = nullptr;
+  // `perch bench scale`: a synthetic actor. No env is built; each segment is the next of these
+  // recordings (restamped with this actor's weights version), sent at replay_samples_per_s.
+  // Hello, heartbeats, credit and weights run exactly as for a real actor.
+  const std::vector<RecordedSegment>* replay = nullptr;
+  double replay_samples_per_s = 0.0;  // 0: as fast as credit allows
+  EnvSpec replay_spec;                // what Hello reports
 };
 
 struct ActorCounters {
@@ -46,8 +59,10 @@ struct ActorCounters {
   uint64_t weights_rejected = 0;
   uint64_t bytes_sent = 0;
   uint64_t episodes = 0;
-  uint64_t credit_waits = 0;   // times the actor used up its credit and waited (flow control)
-  double credit_wait_s = 0.0;  // seconds spent waiting for credit
+  uint64_t credit_waits = 0;      // times the actor used up its credit and waited (flow control)
+  double credit_wait_s = 0.0;     // seconds spent waiting for credit
+  uint64_t weights_messages = 0;  // weights messages received (new versions, republishes, grants)
+  uint64_t weights_bytes = 0;     // their bytes
 };
 
 class ActorService {
@@ -69,6 +84,11 @@ class ActorService {
   void MaybeHeartbeat();
   void TakeCredit(const proto::Weights& w);
   void WaitForCredit();  // blocks while this version's credit is used up
+  const EnvSpec& spec() const { return options_.replay ? options_.replay_spec : envs_[0]->spec(); }
+  // The next segment of stream i: stepped in its env, or replayed (paced).
+  void Produce(size_t i, PolicyRunner* runner, Rollout* out, EpisodeStats* eps);
+  size_t replay_next_ = 0;
+  double replay_due_s_ = 0.0;
 
   ActorSetup setup_;
   ActorOptions options_;
@@ -81,15 +101,19 @@ class ActorService {
   bool have_weights_ = false;
   double credit_segments_ = 0.0;  // granted per weights version; 0: no limit
   uint64_t credit_epoch_ = 0;
-  double credit_carry_ = 0.0;     // fraction carried into the next version, in [0, 1)
-  double credit_base_ = 0.0;      // the carry this version started with
+  double credit_carry_ = 0.0;      // fraction carried into the next version, in [0, 1)
+  double credit_base_ = 0.0;       // the carry this version started with
   uint64_t credit_allowance_ = 0;  // floor(base + grant): segments this version may send
-  uint64_t sent_in_grant_ = 0;    // segments sent stamped with credit_version_
+  uint64_t sent_in_grant_ = 0;     // segments sent stamped with credit_version_
   uint64_t credit_run_id_ = 0;
   uint64_t credit_version_ = ~uint64_t{0};
   std::vector<std::unique_ptr<Env>> envs_;
   std::vector<std::unique_ptr<HierarchicalCollector>> collectors_;
   Rng rng_;
+  // cluster.simulated_lag: the newest weights versions received, newest first; each segment acts
+  // with one drawn by lag_rng_ (its own stream, so the envs' randomness is the same as without).
+  std::deque<PolicyRunner> lag_history_;
+  Rng lag_rng_;
   ActorCounters counters_;
   double start_s_ = 0.0;
   double last_heartbeat_s_ = 0.0;

@@ -90,7 +90,8 @@ struct OverrideFlags {
     }
     std::vector<std::string> all = sets;
     if (max_samples > 0) all.push_back("cluster.max_samples=" + std::to_string(max_samples));
-    if (target_success > 0) all.push_back("cluster.target_success=" + fmt::format("{}", target_success));
+    if (target_success > 0)
+      all.push_back("cluster.target_success=" + fmt::format("{}", target_success));
     return all;
   }
 };
@@ -367,7 +368,9 @@ struct ClusterRunOptions {
   double seconds = 0.0;     // stop after this long (0: no limit)
   int64_t max_updates = 0;  // the learner stops after this many updates (0: no limit)
   double timeout_s = 900.0;
-  std::string dir;  // run dir and logs go here
+  std::string dir;                         // run dir and logs go here
+  int rollout_port = 0, weights_port = 0;  // 0: free ports picked here
+  bool self_cpu = false;  // count this process's CPU as actors' (bench scale's in-process actors)
 };
 
 // One learner + actors on loopback. CPU time of every process is sampled whenever an update lands,
@@ -403,7 +406,8 @@ struct ClusterRun {
 
 ClusterRun RunCluster(const ClusterRunOptions& o) {
   const std::string run_dir = o.dir + "/run";
-  const int rp = PickFreePort(), wp = PickFreePort();
+  const int rp = o.rollout_port > 0 ? o.rollout_port : PickFreePort();
+  const int wp = o.weights_port > 0 ? o.weights_port : PickFreePort();
   std::vector<std::string> largv = {o.exe,
                                     "learner",
                                     "--config",
@@ -443,6 +447,7 @@ ClusterRun RunCluster(const ClusterRunOptions& o) {
       const double lcpu = ProcessCpuSeconds(learner);
       double cpu = lcpu;
       for (pid_t p : pids) cpu += ProcessCpuSeconds(p);
+      if (o.self_cpu) cpu += ProcessCpuSeconds(::getpid());
       for (; seen < lines; ++seen) {
         r.cpu_at_update.push_back(cpu);
         r.learner_cpu_at_update.push_back(lcpu);
@@ -735,6 +740,163 @@ int RunBenchFlow(const BenchFlowFlags& f) {
   return ok ? 0 : 1;
 }
 
+// ---- perch bench scale ----
+
+// One real learner process (the config's task and PPO) fed by N synthetic actors over loopback TCP:
+// ActorService objects in this process that replay walk segments recorded from the real env at
+// the start (restamped with their current weights version) at --rate samples/s each, one actor
+// core's worth by default (measured here, env only). Hello, heartbeats, credit and weights are the
+// real actor's, so the learner sees N members: N rollout connections, N weights subscribers.
+struct BenchScaleFlags {
+  std::string config = "configs/default.json";
+  std::vector<int> actors = {1, 4, 16, 64, 256};
+  double rate = 0.0;  // samples/s per synthetic actor; 0: one actor core's, measured
+  double seconds = 20.0;
+  int envs = 0;         // streams per synthetic actor; 0: the config's envs_per_actor
+  int ppo_threads = 0;  // 0: the config's
+  int record = 16;      // segments recorded from the real env
+  bool json = false;
+};
+
+std::vector<RecordedSegment> RecordSegments(const ExperimentConfig& cfg, int count) {
+  const ActorSetup setup = MakeActorSetup(cfg);
+  PolicyRunner runner(setup.policy, setup.obs_norm);
+  runner.SetWeights(ActorCritic(setup.policy, setup.seed).params(), runner.normalizer().stats(), 0);
+  std::vector<std::unique_ptr<Env>> envs;
+  std::vector<std::unique_ptr<RolloutCollector>> collectors;
+  Rng rng(cfg.seed + 17);
+  const int streams = std::max(1, std::min(count, setup.cluster.envs_per_actor));
+  for (int i = 0; i < streams; ++i) {
+    envs.push_back(setup.make_env());
+    envs.back()->Seed(rng.NextU64());
+    collectors.push_back(std::make_unique<RolloutCollector>(envs.back().get(), i));
+  }
+  std::vector<RecordedSegment> out(count);
+  for (int k = 0; k < count; ++k) {
+    collectors[k % streams]->Collect(&runner, rng, setup.cluster.segment_steps, &out[k].rollout,
+                                     &out[k].episodes);
+  }
+  return out;
+}
+
+int RunBenchScale(const BenchScaleFlags& f) {
+  LogToStderr("bench");
+  InstallStopHandlers();
+  if (f.record < 1) throw ConfigError("--record: must be >= 1");
+  if (!(f.rate >= 0 && std::isfinite(f.rate))) throw ConfigError("--rate: must be >= 0");
+  if (!(f.seconds > 0)) throw ConfigError("--seconds: must be > 0");
+  Json base = LoadComposedConfig(f.config);
+  if (f.ppo_threads > 0) base["ppo"]["threads"] = f.ppo_threads;
+  const ExperimentConfig cfg = ExperimentConfigFromJson(base, f.config);
+  const int envs = f.envs > 0 ? f.envs : cfg.cluster.envs_per_actor;
+  double rate = f.rate;
+  if (rate == 0) {
+    double per_cpu = 0;
+    rate = EnvOnlySamplesPerS(cfg, 1, envs, 3.0, &per_cpu);
+    spdlog::info("bench scale: one actor core steps {:.0f} samples/s ({:.0f} per CPU second)", rate,
+                 per_cpu);
+  }
+  spdlog::info("bench scale: recording {} segments of the real env", f.record);
+  const std::vector<RecordedSegment> recorded = RecordSegments(cfg, f.record);
+  const ActorSetup actor_setup = MakeActorSetup(cfg);
+  EnvSpec spec = actor_setup.make_env()->spec();
+  Json runs = Json::array();
+  bool ok = true;
+  for (int n : f.actors) {
+    if (n < 1 || n > 4096) throw ConfigError("--actors: counts must be in 1..4096");
+    if (g_stop.load()) break;
+    const std::string dir = MakeTempDir();
+    const std::string cfg_path = dir + "/config.json";
+    SaveJsonFileAtomic(cfg_path, base);
+    ClusterRunOptions o;
+    o.exe = SelfExe();
+    o.config = cfg_path;
+    o.actors = 0;
+    o.seconds = f.seconds;
+    o.dir = dir;
+    o.rollout_port = PickFreePort();
+    o.weights_port = PickFreePort();
+    o.self_cpu = true;
+    zmq::context_t ctx(2);
+    std::atomic<bool> stop{false};
+    std::vector<std::unique_ptr<ActorService>> actors;
+    std::vector<std::thread> threads;
+    for (int i = 0; i < n; ++i) {
+      ActorOptions ao;
+      ao.rollout_connect = "tcp://127.0.0.1:" + std::to_string(o.rollout_port);
+      ao.weights_connect = "tcp://127.0.0.1:" + std::to_string(o.weights_port);
+      ao.actor_id = static_cast<uint32_t>(i);
+      ao.num_envs = envs;
+      ao.stop = &stop;
+      ao.replay = &recorded;
+      ao.replay_samples_per_s = rate;
+      ao.replay_spec = spec;
+      actors.push_back(std::make_unique<ActorService>(ctx, actor_setup, ao));
+    }
+    for (auto& a : actors) threads.emplace_back([&a] { a->Run(); });
+    const double cpu0 = ProcessCpuSeconds(::getpid());
+    const ClusterRun run = RunCluster(o);
+    stop = true;
+    for (auto& t : threads) t.join();
+    Json r{{"actors", n}, {"offered_samples_per_s", n * rate}};
+    if (!run.ok()) {
+      r["error"] = "fewer than 3 updates (logs in " + dir + ")";
+      ok = false;
+      runs.push_back(r);
+      continue;
+    }
+    ActorCounters sum;
+    for (const auto& a : actors) {
+      const ActorCounters& c = a->counters();
+      sum.segments_sent += c.segments_sent;
+      sum.bytes_sent += c.bytes_sent;
+      sum.weights_messages += c.weights_messages;
+      sum.weights_bytes += c.weights_bytes;
+      sum.credit_waits += c.credit_waits;
+    }
+    const Json& a = run.rows[run.First()];
+    const Json& b = run.rows.back();
+    const double secs = run.Seconds();
+    const double stale = b["dropped_stale"].get<double>() - a["dropped_stale"].get<double>();
+    const double segs = b["segments"].get<double>() - a["segments"].get<double>();
+    const double wall = run.wall_s;
+    r["learner_samples_per_s"] = run.Samples() / secs;
+    r["learner_updates_per_s"] = (run.rows.size() - 1 - run.First()) / secs;
+    r["segments_per_s"] = (segs + stale) / secs;
+    r["drop_share"] = segs + stale > 0 ? stale / (segs + stale) : 0.0;
+    r["learner_cpu_cores"] = run.LearnerCpu() / secs;
+    r["synthetic_actor_cpu_cores"] = (ProcessCpuSeconds(::getpid()) - cpu0) / wall;
+    // Whole-run counters of the synthetic actors (start-up included), per wall second.
+    r["rollout_bytes_per_s"] = sum.bytes_sent / wall;
+    r["rollout_messages_per_s"] = sum.segments_sent / wall;
+    r["weights_bytes_per_s"] = sum.weights_bytes / wall;
+    r["weights_messages_per_s"] = sum.weights_messages / wall;
+    r["wire_bytes_per_sample"] = b["wire_bytes_per_sample"];
+    r["policy_lag_mean"] = b["policy_lag_mean"];
+    r["credit_waits"] = sum.credit_waits;
+    r["actor_cores_fed"] =
+        run.Samples() / secs / rate;  // how many actor cores the learner keeps up with
+    spdlog::info(
+        "bench scale: {} actors (offered {:.0f}/s): learner {:.0f} samples/s ({:.2f} cores), "
+        "{:.1f}% stale, in {:.1f} MB/s, weights out {:.1f} MB/s",
+        n, n * rate, r["learner_samples_per_s"].get<double>(), r["learner_cpu_cores"].get<double>(),
+        100 * r["drop_share"].get<double>(), r["rollout_bytes_per_s"].get<double>() / 1e6,
+        r["weights_bytes_per_s"].get<double>() / 1e6);
+    runs.push_back(r);
+  }
+  const Json out{{"bench", "scale"},
+                 {"config", f.config},
+                 {"seconds", f.seconds},
+                 {"rate_per_actor", rate},
+                 {"envs_per_actor", envs},
+                 {"ppo_threads", cfg.ppo.threads},
+                 {"steps_per_update", cfg.ppo.steps_per_update},
+                 {"cores", static_cast<int>(std::max(1u, std::thread::hardware_concurrency()))},
+                 {"runs", runs}};
+  std::cout << (f.json ? out.dump() : out.dump(2)) << std::endl;
+  return ok ? 0 : 1;
+}
+
 // ---- perch bench train ----
 
 // The physics before issue 19 (docs/env.md): Bullet's infinite floor bounds, its 4096-entry
@@ -759,7 +921,7 @@ struct BenchTrainFlags {
 struct TrainArm {
   std::string name, exe, physics, config_path;
   std::vector<double> samples, seconds, cpu, learner_cpu;  // per run, steady-state window
-  std::vector<double> episodes;  // per run, episodes ended in the window
+  std::vector<double> episodes;                            // per run, episodes ended in the window
 };
 
 Json ArmJson(const TrainArm& a) {
@@ -846,8 +1008,8 @@ int RunBenchTrain(const BenchTrainFlags& f) {
       if (!run.ok()) {
         throw std::runtime_error("bench train: " + a.name + " run " + std::to_string(r) +
                                  " finished " + std::to_string(run.rows.size()) +
-                                 " updates, too few after the first CPU reading (logs in " +
-                                 o.dir + "); raise --updates");
+                                 " updates, too few after the first CPU reading (logs in " + o.dir +
+                                 "); raise --updates");
       }
       if (!(run.Cpu() > 0.0 && run.Seconds() > 0.0)) {
         throw std::runtime_error("bench train: " + a.name + " run " + std::to_string(r) +
@@ -966,6 +1128,23 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   fl->add_flag("--json", ff->json, "print one JSON object");
   fl->callback([ff] {
     const int rc = RunBenchFlow(*ff);
+    if (rc != 0) throw CLI::RuntimeError(rc);
+  });
+
+  // perch bench scale
+  auto scf = std::make_shared<BenchScaleFlags>();
+  CLI::App* sc = bench.add_subcommand(
+      "scale", "One learner fed by N synthetic actors (recorded segments replayed over loopback)");
+  sc->add_option("--config", scf->config, "experiment config (default: walk)");
+  sc->add_option("--actors", scf->actors, "synthetic actor counts, e.g. 1,16,256")->delimiter(',');
+  sc->add_option("--rate", scf->rate, "samples/s per synthetic actor (default: one actor core's)");
+  sc->add_option("--seconds", scf->seconds, "duration of each run");
+  sc->add_option("--envs", scf->envs, "streams per synthetic actor (default: the config's)");
+  sc->add_option("--ppo-threads", scf->ppo_threads, "the learner's ppo.threads (default: config)");
+  sc->add_option("--record", scf->record, "segments recorded from the real env and replayed");
+  sc->add_flag("--json", scf->json, "print one JSON object");
+  sc->callback([scf] {
+    const int rc = RunBenchScale(*scf);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });
 

@@ -12,6 +12,7 @@
 #include <iostream>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "app/commands.h"
@@ -51,6 +52,8 @@ struct BenchOptions {
   int threads = 1;
   int epochs = 1;
   uint64_t seed = 0;
+  bool blocks = false;   // time all one-thread updates, then all N-thread ones (not alternating)
+  bool ceiling = false;  // also time N one-thread learners at once: what N cores give here
   bool json = false;
 };
 
@@ -102,8 +105,29 @@ void RunBench(const BenchOptions& o) {
     auto t0 = Clock::now();
     learner.Update(batch);
     times.push_back(Seconds(t0, Clock::now()));
-    if (!compare) continue;
+    if (!compare || o.blocks) continue;
     t0 = Clock::now();
+    learner_n.Update(batch);
+    times_n.push_back(Seconds(t0, Clock::now()));
+  }
+  // The machine's own ceiling: N independent one-thread updates at once, against one alone. A VM's
+  // cores may share a physical core, caches or a power budget; N threads cannot beat this.
+  std::vector<double> times_conc;
+  std::vector<PpoLearner> copies;
+  if (compare && o.ceiling) {
+    copies.assign(o.threads - 1, learner);
+    for (PpoLearner& c : copies) c.Update(batch);
+  }
+  for (int i = 0; compare && o.ceiling && i < o.repeats; ++i) {
+    const auto t0 = Clock::now();
+    std::vector<std::thread> others;
+    for (PpoLearner& c : copies) others.emplace_back([&c, &batch] { c.Update(batch); });
+    learner.Update(batch);
+    for (std::thread& t : others) t.join();
+    times_conc.push_back(Seconds(t0, Clock::now()));
+  }
+  for (int i = 0; compare && o.blocks && i < o.repeats; ++i) {
+    const auto t0 = Clock::now();
     learner_n.Update(batch);
     times_n.push_back(Seconds(t0, Clock::now()));
   }
@@ -147,6 +171,12 @@ void RunBench(const BenchOptions& o) {
     j["update_ms_runs_threads_n"] = msn;
     j["speedup_threads_n_min"] = *std::min_element(ratios.begin(), ratios.end());
     j["speedup_threads_n_max"] = *std::max_element(ratios.begin(), ratios.end());
+    if (!times_conc.empty()) {
+      // N updates' worth of work in the time N concurrent one-thread learners took, over one alone.
+      j["ceiling_threads_n"] = o.threads * med / Median(times_conc);
+      j["speedup_of_ceiling"] =
+          j["speedup_threads_n"].get<double>() / j["ceiling_threads_n"].get<double>();
+    }
   }
   if (o.json) {
     std::cout << j.dump() << std::endl;
@@ -290,7 +320,8 @@ Json RunToy(const ToyOptions& o) {
 
 void RegisterLearnerCommands(CLI::App& root, CLI::App& bench) {
   auto bo = std::make_shared<BenchOptions>();
-  CLI::App* b = bench.add_subcommand("ppo", "PPO update throughput (Eigen; one core, or --threads)");
+  CLI::App* b =
+      bench.add_subcommand("ppo", "PPO update throughput (Eigen; one core, or --threads)");
   b->add_option("--obs-dim", bo->obs_dim, "observation size (57 sit/meta, 52 walk/turn)");
   b->add_option("--batch", bo->batch, "samples per update (Table 2: 8192)");
   b->add_option("--minibatches", bo->minibatches, "minibatches per epoch (Table 2: 32)");
@@ -300,6 +331,12 @@ void RegisterLearnerCommands(CLI::App& root, CLI::App& bench) {
                 "epochs per timed update (1: the historical one-epoch figure; Table 2: 4)");
   b->add_option("--threads", bo->threads,
                 "PPO threads (ppo.threads); > 1 also times one thread and reports the speedup");
+  b->add_flag("--blocks", bo->blocks,
+              "with --threads: all one-thread updates first, then all N-thread ones (each learner "
+              "keeps its caches warm) instead of alternating update by update");
+  b->add_flag("--ceiling", bo->ceiling,
+              "with --threads N: also time N one-thread learners running at once (the speedup N "
+              "cores give on this machine, the ceiling for N threads)");
   b->add_flag("--json", bo->json, "print one JSON object");
   b->callback([bo] {
     UseStderrLogger();

@@ -11,6 +11,8 @@ namespace {
 // A minibatch is split across threads only into parts at least this big: smaller ones cost more
 // in hand-off than they save.
 constexpr int kMinShardSamples = 16;
+// V-trace: log pi/mu is capped here before exp, so that the ratio statistics stay finite.
+constexpr float kMaxLogRatio = 20.0f;
 }  // namespace
 
 PpoConfig PpoConfig::Subtask() { return PpoConfig(); }
@@ -44,6 +46,9 @@ Json ToJson(const PpoConfig& c) {
               {"advantage_eps", c.advantage_eps},
               {"bootstrap_on_truncation", c.bootstrap_on_truncation},
               {"threads", c.threads},
+              {"vtrace", c.vtrace},
+              {"vtrace_rho_clip", c.vtrace_rho_clip},
+              {"vtrace_c_clip", c.vtrace_c_clip},
               {"obs_norm", ToJson(c.obs_norm)},
               {"reward_scaling", ToJson(c.reward_scaling)}};
 }
@@ -70,6 +75,9 @@ PpoConfig PpoConfigFromJson(const Json& j, const std::string& ctx) {
                   "advantage_eps",
                   "bootstrap_on_truncation",
                   "threads",
+                  "vtrace",
+                  "vtrace_rho_clip",
+                  "vtrace_c_clip",
                   "obs_norm",
                   "reward_scaling"},
                  ctx);
@@ -93,6 +101,9 @@ PpoConfig PpoConfigFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "advantage_eps", c.advantage_eps, ctx);
   GetOptional(j, "bootstrap_on_truncation", c.bootstrap_on_truncation, ctx);
   GetOptional(j, "threads", c.threads, ctx);
+  GetOptional(j, "vtrace", c.vtrace, ctx);
+  GetOptional(j, "vtrace_rho_clip", c.vtrace_rho_clip, ctx);
+  GetOptional(j, "vtrace_c_clip", c.vtrace_c_clip, ctx);
   if (j.contains("obs_norm"))
     c.obs_norm = NormalizerConfigFromJson(j["obs_norm"], ctx + ".obs_norm");
   if (j.contains("reward_scaling")) {
@@ -118,6 +129,10 @@ PpoConfig PpoConfigFromJson(const Json& j, const std::string& ctx) {
   require(c.adam_eps > 0, "adam_eps", "must be > 0");
   require(c.advantage_eps >= 0, "advantage_eps", "must be >= 0");
   require(c.threads >= 1 && c.threads <= 256, "threads", "must be in [1, 256]");
+  require(c.vtrace_rho_clip > 0 && std::isfinite(c.vtrace_rho_clip), "vtrace_rho_clip",
+          "must be finite and > 0");
+  require(c.vtrace_c_clip > 0 && std::isfinite(c.vtrace_c_clip), "vtrace_c_clip",
+          "must be finite and > 0");
   return c;
 }
 
@@ -135,7 +150,10 @@ Json ToJson(const UpdateStats& s) {
               {"mean_scaled_reward", s.mean_scaled_reward},
               {"mean_advantage", s.mean_advantage},
               {"mean_return", s.mean_return},
-              {"log_std_mean", s.log_std_mean}};
+              {"log_std_mean", s.log_std_mean},
+              {"lagged_samples", s.lagged_samples},
+              {"vtrace_ratio_mean", s.vtrace_ratio_mean},
+              {"vtrace_rho_clipped", s.vtrace_rho_clipped}};
 }
 
 PpoLossTerms PpoLossFromEval(const PpoConfig& cfg, const Eigen::Ref<const VectorXf>& old_logp,
@@ -186,8 +204,8 @@ PpoLossTerms PpoLossFromEval(const PpoConfig& cfg, const Eigen::Ref<const Vector
   PpoLossTerms t;
   t.policy_loss = pg * inv_b;
   t.value_loss = vf * inv_b;
-  t.entropy = mean_over > 0 ? ev.entropy.cast<double>().sum() * inv_b
-                            : ev.entropy.cast<double>().mean();
+  t.entropy =
+      mean_over > 0 ? ev.entropy.cast<double>().sum() * inv_b : ev.entropy.cast<double>().mean();
   t.approx_kl = kl * inv_b;
   t.clip_fraction = cf * inv_b;
   t.total = t.policy_loss - cfg.entropy_coef * t.entropy + cfg.value_coef * t.value_loss;
@@ -260,6 +278,8 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
   adv_.resize(n);
   ret_.resize(n);
   double sum_r = 0.0, sum_sr = 0.0;
+  double sum_ratio = 0.0;
+  int lagged = 0, rho_clipped = 0;
   std::vector<uint8_t> done;
   int off = 0;
   for (const Rollout& r : rollouts) {
@@ -272,12 +292,36 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
     reward_scaler_.ScaleInPlace(r.stream_id, scaled_rewards_.data(), done.data(), t);
     seg_adv_.resize(t);
     seg_ret_.resize(t);
-    ComputeGae(r, scaled_rewards_.data(), ppo_.gamma, ppo_.gae_lambda, ppo_.bootstrap_on_truncation,
-               seg_adv_.data(), seg_ret_.data());
     obs_.middleCols(off, t) = Eigen::Map<const MatrixXf>(r.obs.data(), obs_dim, t);
     actions_.middleCols(off, t) = Eigen::Map<const MatrixXf>(r.actions.data(), act_size, t);
-    old_logp_.segment(off, t) = Eigen::Map<const VectorXf>(r.log_probs.data(), t);
-    old_value_.segment(off, t) = Eigen::Map<const VectorXf>(r.values.data(), t);
+    const bool is_lagged = r.policy_version < static_cast<uint64_t>(num_updates_);
+    if (is_lagged) lagged += t;
+    if (ppo_.vtrace && is_lagged) {
+      // Acted with older weights: the current policy and value network on the segment's steps.
+      PolicyEvalCache& ev = ws_.eval;
+      model_.Evaluate(model_.params().data(), obs_.middleCols(off, t), actions_.middleCols(off, t),
+                      &ev);
+      seg_rho_.resize(t);
+      seg_c_.resize(t);
+      for (int k = 0; k < t; ++k) {
+        const float ratio = std::exp(std::min(ev.log_prob[k] - r.log_probs[k], kMaxLogRatio));
+        seg_rho_[k] = std::min(ppo_.vtrace_rho_clip, ratio);
+        seg_c_[k] = std::min(ppo_.vtrace_c_clip, ratio);
+        sum_ratio += ratio;
+        rho_clipped += ratio > ppo_.vtrace_rho_clip;
+      }
+      ComputeVtrace(r, scaled_rewards_.data(), ev.value.data(), seg_rho_.data(), seg_c_.data(),
+                    ppo_.gamma, ppo_.gae_lambda, ppo_.bootstrap_on_truncation, seg_adv_.data(),
+                    seg_ret_.data());
+      // PPO's ratio and value clipping then measure against the learner's own start point.
+      old_logp_.segment(off, t) = ev.log_prob.head(t);
+      old_value_.segment(off, t) = ev.value.head(t);
+    } else {
+      ComputeGae(r, scaled_rewards_.data(), ppo_.gamma, ppo_.gae_lambda,
+                 ppo_.bootstrap_on_truncation, seg_adv_.data(), seg_ret_.data());
+      old_logp_.segment(off, t) = Eigen::Map<const VectorXf>(r.log_probs.data(), t);
+      old_value_.segment(off, t) = Eigen::Map<const VectorXf>(r.values.data(), t);
+    }
     adv_.segment(off, t) = Eigen::Map<const VectorXf>(seg_adv_.data(), t);
     ret_.segment(off, t) = Eigen::Map<const VectorXf>(seg_ret_.data(), t);
     for (int k = 0; k < t; ++k) {
@@ -287,6 +331,11 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
     off += t;
   }
   st.num_samples = n;
+  st.lagged_samples = lagged;
+  if (lagged > 0) {
+    st.vtrace_ratio_mean = static_cast<float>(sum_ratio / lagged);
+    st.vtrace_rho_clipped = static_cast<float>(rho_clipped) / lagged;
+  }
   st.mean_reward = static_cast<float>(sum_r / n);
   st.mean_scaled_reward = static_cast<float>(sum_sr / n);
   st.mean_advantage = adv_.mean();
@@ -313,13 +362,13 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
       const int begin = static_cast<int>(static_cast<int64_t>(m) * n / num_mb);
       const int end = static_cast<int>(static_cast<int64_t>(m + 1) * n / num_mb);
       const int b = end - begin;
-      // Threads: the policy and value networks of a part of the minibatch each on a thread.
-      const int shards = std::max(1, std::min(ppo_.threads / 2, b / kMinShardSamples));
       PpoLossTerms lt;
       float gn;
       if (ppo_.threads > 1) {
-        lt = ShardedLoss(begin, b, shards, params);
-        gn = shards > 1 ? ShardedStep() : PooledStep(&shards_[0].grad);
+        // Parts of the minibatch on threads of their own (at least kMinShardSamples each).
+        lt =
+            ColumnLoss(begin, b, std::max(1, std::min(ppo_.threads, b / kMinShardSamples)), params);
+        gn = ShardedStep();
       } else {
         ResizeShard(&mb_, b);
         GatherColumns(&mb_, begin, 0, b);
@@ -380,20 +429,17 @@ void PpoLearner::NormalizeAdvantages(VectorXf* adv) const {
   adv->array() = (adv->array() - mean) / (sd + ppo_.advantage_eps);
 }
 
-// One minibatch [begin, begin + b) of perm_ on ppo.threads threads: split into `shards` contiguous
-// parts, and each part's policy and value networks (independent: disjoint weights and gradients)
-// run on threads of their own. Each part adds its share of the minibatch-mean loss gradient
-// (PpoLossFromEval with mean_over = b) into its own buffer. With one part (2 or 3 threads) the
-// arithmetic is exactly the one-thread update's; with more, the parts' sums add in part order, so
-// a thread count still gives the same bits every run.
-PpoLossTerms PpoLearner::ShardedLoss(int begin, int b, int shards, const float* params) {
-  if (!pool_ || pool_->threads() != ppo_.threads) pool_ = std::make_shared<WorkerPool>(ppo_.threads);
-  if (static_cast<int>(shards_.size()) < shards) shards_.resize(shards);
-  active_shards_ = shards;
+// One minibatch on `parts` threads, each with a contiguous part of its columns and both networks:
+// gather, normalise (over the whole minibatch), evaluate, loss and backward in one round per
+// minibatch; ShardedStep then sums the parts' gradients in part order (same bits every run).
+PpoLossTerms PpoLearner::ColumnLoss(int begin, int b, int parts, const float* params) {
+  if (!pool_ || pool_->threads() != ppo_.threads)
+    pool_ = std::make_shared<WorkerPool>(ppo_.threads);
+  if (static_cast<int>(shards_.size()) < parts) shards_.resize(parts);
+  active_shards_ = parts;
   const bool normalize = ppo_.normalize_advantages && b > 1;
-  // Several parts: advantages normalised over the whole minibatch, as one thread does.
   float adv_mean = 0.0f, adv_scale = 1.0f;
-  if (normalize && shards > 1) {
+  if (normalize) {
     double sum = 0.0;
     for (int k = 0; k < b; ++k) sum += adv_[perm_[begin + k]];
     const double mean = sum / b;
@@ -405,54 +451,23 @@ PpoLossTerms PpoLearner::ShardedLoss(int begin, int b, int shards, const float* 
     adv_mean = static_cast<float>(mean);
     adv_scale = 1.0f / (static_cast<float>(std::sqrt(ss / b)) + ppo_.advantage_eps);
   }
-  auto bounds = [&](int s, int* lo, int* bs) {
-    *lo = begin + static_cast<int>(static_cast<int64_t>(s) * b / shards);
-    *bs = begin + static_cast<int>(static_cast<int64_t>(s + 1) * b / shards) - *lo;
-  };
-  for (int s = 0; s < shards; ++s) {
-    int lo, bs;
-    bounds(s, &lo, &bs);
-    ResizeShard(&shards_[s], bs);
-  }
-  // Gather: two threads per part, each copying half of its columns (disjoint writes).
-  pool_->Run(2 * shards, [&](int t) {
-    Shard& sh = shards_[t / 2];
-    int lo, bs;
-    bounds(t / 2, &lo, &bs);
-    GatherColumns(&sh, lo, t % 2 == 0 ? 0 : bs / 2, t % 2 == 0 ? bs / 2 : bs);
-  });
-  pool_->Run(shards, [&](int s) {
+  const int np = model_.num_params();
+  pool_->Run(parts, [&](int s) {
     Shard& sh = shards_[s];
-    if (normalize && shards == 1) {
-      NormalizeAdvantages(&sh.adv);  // as the one-thread path, for the same bits
-    } else if (normalize) {
-      sh.adv.array() = (sh.adv.array() - adv_mean) * adv_scale;
-    }
-  });
-  pool_->Run(2 * shards, [&](int t) {
-    Shard& sh = shards_[t / 2];
-    if (t % 2 == 0) {
-      model_.EvaluatePolicy(params, sh.obs, sh.act, &sh.ws.eval);
-    } else {
-      model_.EvaluateValue(params, sh.obs, &sh.ws.eval);
-    }
-  });
-  pool_->Run(shards, [&](int s) {
-    Shard& sh = shards_[s];
-    sh.terms = PpoLossFromEval(ppo_, sh.logp, sh.value, sh.adv, sh.ret, &sh.ws,
-                               shards > 1 ? b : 0);
-    sh.grad.setZero(model_.num_params());
-  });
-  pool_->Run(2 * shards, [&](int t) {
-    Shard& sh = shards_[t / 2];
-    if (t % 2 == 0) {
-      model_.BackwardPolicy(params, sh.ws.dlogp, sh.ws.dent, &sh.ws.eval, sh.grad.data());
-    } else {
-      model_.BackwardValue(params, sh.ws.dval, &sh.ws.eval, sh.grad.data());
-    }
+    const int lo = begin + static_cast<int>(static_cast<int64_t>(s) * b / parts);
+    const int bs = begin + static_cast<int>(static_cast<int64_t>(s + 1) * b / parts) - lo;
+    ResizeShard(&sh, bs);
+    GatherColumns(&sh, lo, 0, bs);
+    if (normalize) sh.adv.array() = (sh.adv.array() - adv_mean) * adv_scale;
+    model_.EvaluatePolicy(params, sh.obs, sh.act, &sh.ws.eval);
+    model_.EvaluateValue(params, sh.obs, &sh.ws.eval);
+    sh.terms = PpoLossFromEval(ppo_, sh.logp, sh.value, sh.adv, sh.ret, &sh.ws, b);
+    sh.grad.setZero(np);
+    model_.BackwardPolicy(params, sh.ws.dlogp, sh.ws.dent, &sh.ws.eval, sh.grad.data());
+    model_.BackwardValue(params, sh.ws.dval, &sh.ws.eval, sh.grad.data());
   });
   PpoLossTerms t = shards_[0].terms;
-  for (int s = 1; s < shards; ++s) {
+  for (int s = 1; s < parts; ++s) {
     const PpoLossTerms& u = shards_[s].terms;
     t.total += u.total;
     t.policy_loss += u.policy_loss;
@@ -462,37 +477,6 @@ PpoLossTerms PpoLearner::ShardedLoss(int begin, int b, int shards, const float* 
     t.clip_fraction += u.clip_fraction;
   }
   return t;
-}
-
-// SerialStep's arithmetic on two threads: the element-wise parts (mask, clip scale, Adam) on two
-// halves of the parameters split at a multiple of 64 elements, the norm on one thread as before.
-float PpoLearner::PooledStep(VectorXf* grad) {
-  VectorXf& g = *grad;
-  const int np = model_.num_params();
-  const int split = (np / 2) & ~63;
-  if (split == 0) return SerialStep(grad);
-  const VectorXf& mask = model_.trainable_mask();
-  auto half = [&](int r, int* lo, int* n) {
-    *lo = r == 0 ? 0 : split;
-    *n = r == 0 ? split : np - split;
-  };
-  pool_->Run(2, [&](int r) {
-    int lo, n;
-    half(r, &lo, &n);
-    g.segment(lo, n).array() *= mask.segment(lo, n).array();
-  });
-  const float gn = g.norm();
-  const float scale =
-      ppo_.max_grad_norm > 0 && gn > ppo_.max_grad_norm ? ppo_.max_grad_norm / gn : 1.0f;
-  const float lr_t = adam_.BeginStep(ppo_.learning_rate);
-  float* params = model_.params().data();
-  pool_->Run(2, [&](int r) {
-    int lo, n;
-    half(r, &lo, &n);
-    if (scale != 1.0f) g.segment(lo, n) *= scale;
-    adam_.ApplyRange(params, g.data(), lr_t, lo, lo + n);
-  });
-  return gn;
 }
 
 // Mask, global-norm clip and the Adam step on one gradient, as the one-thread update does.
@@ -505,7 +489,7 @@ float PpoLearner::SerialStep(VectorXf* grad) {
   return gn;
 }
 
-// After ShardedLoss: the parts' gradients summed, masked, clipped to the global norm and the Adam
+// After ColumnLoss: the parts' gradients summed, masked, clipped to the global norm and the Adam
 // step, each thread on its own range of the parameters (two rounds: the norm needs every range).
 // Returns the gradient norm before clipping.
 float PpoLearner::ShardedStep() {

@@ -50,6 +50,15 @@ struct PpoConfig {
   // Threads of the PPO update (ours, issue 20): each minibatch's gradient is split across them.
   // A count gives the same result every run; counts differ only in floating-point summation order.
   int threads = 1;
+  // Off-policy correction for segments that acted with older weights than the learner's (policy
+  // lag >= 1; ours, issue 20): V-trace's truncated importance weights (Espeholt et al. 2018) on
+  // the advantages and value targets, rho_t = min(vtrace_rho_clip, pi/mu), c_t = min(vtrace_c_clip,
+  // pi/mu), with the learner's current value network; PPO's ratio is then taken against the
+  // learner's policy at the start of the update. Segments of the current version are unchanged
+  // (plain GAE). Off: lagged segments are trained on as if on-policy (Baselines PPO2).
+  bool vtrace = false;
+  float vtrace_rho_clip = 1.0f;
+  float vtrace_c_clip = 1.0f;
   NormalizerConfig obs_norm;
   RewardScalingConfig reward_scaling;
 
@@ -75,6 +84,12 @@ struct UpdateStats {
   float mean_advantage = 0.0f;  // before normalization
   float mean_return = 0.0f;     // GAE targets
   float log_std_mean = 0.0f;    // after the update
+  // Samples from segments older than the learner (policy lag >= 1); with ppo.vtrace, over those,
+  // the mean importance ratio pi/mu before truncation and the fraction truncated by
+  // vtrace_rho_clip.
+  int lagged_samples = 0;
+  float vtrace_ratio_mean = 0.0f;
+  float vtrace_rho_clipped = 0.0f;
 };
 Json ToJson(const UpdateStats& s);
 
@@ -155,7 +170,7 @@ class PpoLearner {
   MatrixXf obs_, actions_;  // [obs_dim x N], [action_size x N]
   VectorXf old_logp_, old_value_, adv_, ret_;
   std::vector<int> perm_;
-  // A minibatch, or with ppo.threads > 1 one part of it per pair of threads.
+  // A minibatch, or with ppo.threads > 1 one part of it per thread.
   struct Shard {
     MatrixXf obs, act;
     VectorXf logp, value, adv, ret, grad;
@@ -165,15 +180,14 @@ class PpoLearner {
   Shard mb_;  // the one-thread path's minibatch
   VectorXf grad_;
   PpoLossWorkspace ws_;
-  std::vector<float> scaled_rewards_, seg_adv_, seg_ret_;
+  std::vector<float> scaled_rewards_, seg_adv_, seg_ret_, seg_rho_, seg_c_;
 
   void ResizeShard(Shard* sh, int bs) const;
   void GatherColumns(Shard* sh, int lo, int k0, int k1) const;  // columns [k0, k1) of perm_[lo..]
   void NormalizeAdvantages(VectorXf* adv) const;  // (A - mean) / (std + eps) over the vector
-  PpoLossTerms ShardedLoss(int begin, int b, int shards, const float* params);
+  PpoLossTerms ColumnLoss(int begin, int b, int parts, const float* params);
   float ShardedStep();
   float SerialStep(VectorXf* grad);
-  float PooledStep(VectorXf* grad);
   int active_shards_ = 0;
   std::vector<double> range_sq_;
   std::vector<Shard> shards_;

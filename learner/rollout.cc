@@ -140,8 +140,16 @@ Rollout Rollout::FromProto(const proto::RolloutSegment& p, const std::string& ct
 
 void ComputeGae(const Rollout& r, const float* rewards, float gamma, float lambda,
                 bool bootstrap_on_truncation, float* advantages, float* returns) {
+  ComputeVtrace(r, rewards, nullptr, nullptr, nullptr, gamma, lambda, bootstrap_on_truncation,
+                advantages, returns);
+}
+
+void ComputeVtrace(const Rollout& r, const float* rewards, const float* values, const float* rho,
+                   const float* c, float gamma, float lambda, bool bootstrap_on_truncation,
+                   float* advantages, float* returns) {
   const int n = r.size();
   if (rewards == nullptr) rewards = r.rewards.data();
+  if (values == nullptr) values = r.values.data();
   float next_adv = 0.0f;
   for (int t = n - 1; t >= 0; --t) {
     const bool term = r.terminated[t] != 0;
@@ -155,14 +163,17 @@ void ComputeGae(const Rollout& r, const float* rewards, float gamma, float lambd
     } else if (last) {
       next_value = r.bootstrap_values[t];
     } else {
-      next_value = r.values[t + 1];
+      next_value = values[t + 1];
     }
     // The recursion continues only inside one episode and one segment.
     const float cont = (term || trunc || last) ? 0.0f : 1.0f;
-    const float delta = rewards[t] + gamma * next_value - r.values[t];
-    next_adv = delta + gamma * lambda * cont * next_adv;
+    float delta = rewards[t] + gamma * next_value - values[t];
+    float trace = gamma * lambda * cont;
+    if (rho != nullptr) delta *= rho[t];
+    if (c != nullptr) trace *= c[t];
+    next_adv = delta + trace * next_adv;
     advantages[t] = next_adv;
-    returns[t] = next_adv + r.values[t];
+    returns[t] = next_adv + values[t];
   }
 }
 

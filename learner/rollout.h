@@ -63,6 +63,17 @@ struct Rollout {
 void ComputeGae(const Rollout& r, const float* rewards, float gamma, float lambda,
                 bool bootstrap_on_truncation, float* advantages, float* returns);
 
+// V-trace (Espeholt et al. 2018) in GAE's form, for a segment that acted with older weights:
+//   delta_t = rho_t (r_t + gamma * V_next_t - V_t), A_t = delta_t + gamma * lambda * c_t * A_{t+1},
+// with V_t = values[t] (the learner's current value network; V_next_t as for GAE but from values,
+// except the bootstrap values at truncation and segment end, which stay the acting network's: the
+// observation they came from is not in the segment), rho_t and c_t the truncated importance
+// ratios. returns = A + V are V-trace's targets v_s. rho = c = 1 and values = r.values is
+// ComputeGae, bit for bit.
+void ComputeVtrace(const Rollout& r, const float* rewards, const float* values, const float* rho,
+                   const float* c, float gamma, float lambda, bool bootstrap_on_truncation,
+                   float* advantages, float* returns);
+
 // Per-episode bookkeeping from a collector.
 struct EpisodeStats {
   std::vector<double> returns;  // undiscounted, raw rewards, of episodes finished

@@ -28,7 +28,8 @@ Json ToJson(const ClusterConfig& c) {
               {"target_success", c.target_success},
               {"target_window", c.target_window},
               {"credit_slack", c.credit_slack},
-              {"credit_regrant_s", c.credit_regrant_s}};
+              {"credit_regrant_s", c.credit_regrant_s},
+              {"simulated_lag", c.simulated_lag}};
 }
 
 namespace {
@@ -47,7 +48,8 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
        "milestone_every", "heartbeat_s", "actor_timeout_s", "max_message_bytes",
        "max_segment_steps", "max_wire_value", "reconnect_ivl_ms", "hierarchy_meta_period", "hierarchy_enabled",
        "restart_backoff_ms", "learner_queue_segments", "init_from", "max_samples",
-       "target_success", "target_window", "credit_slack", "credit_regrant_s"},
+       "target_success", "target_window", "credit_slack", "credit_regrant_s",
+       "simulated_lag"},
       ctx);
   ClusterConfig c;
   GetOptional(j, "task", c.task, ctx);
@@ -73,6 +75,7 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "target_window", c.target_window, ctx);
   GetOptional(j, "credit_slack", c.credit_slack, ctx);
   GetOptional(j, "credit_regrant_s", c.credit_regrant_s, ctx);
+  GetOptional(j, "simulated_lag", c.simulated_lag, ctx);
   c.task = TaskName(TaskFromName(c.task, ctx + ".task"));  // one spelling from here on
   CheckMin(ctx, "segment_steps", c.segment_steps, 1);
   CheckMin(ctx, "envs_per_actor", c.envs_per_actor, 1);
@@ -100,6 +103,12 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
     throw ConfigError(ctx + ".credit_slack: must be in [0, 100] (0: no flow control)");
   }
   CheckMin(ctx, "credit_regrant_s", c.credit_regrant_s, 0.01);
+  CheckMin(ctx, "simulated_lag", c.simulated_lag, 0);
+  if (c.simulated_lag > c.max_policy_lag) {
+    // Every segment drawn past the learner's window would be dropped as stale.
+    throw ConfigError(ctx + ".simulated_lag: " + std::to_string(c.simulated_lag) +
+                      " exceeds max_policy_lag " + std::to_string(c.max_policy_lag));
+  }
   if (c.segment_steps > c.max_segment_steps) {
     throw ConfigError(ctx + ".segment_steps: " + std::to_string(c.segment_steps) +
                       " exceeds max_segment_steps " + std::to_string(c.max_segment_steps));

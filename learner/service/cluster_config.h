@@ -54,6 +54,11 @@ struct ClusterConfig {
   // full grants again (an actor that left took its credit with it).
   double credit_slack = 1.0;
   double credit_regrant_s = 0.25;
+  // An experiment knob (ours, issue 20): each actor keeps the newest simulated_lag + 1 weights
+  // versions it received and acts each segment with one drawn uniformly among them, so segments
+  // arrive up to simulated_lag versions old (plus the natural lag). For measuring off-policy
+  // corrections (ppo.vtrace) on a machine too small to lag by itself. 0: off.
+  int simulated_lag = 0;
 };
 
 Json ToJson(const ClusterConfig& c);

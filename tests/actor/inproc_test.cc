@@ -125,8 +125,8 @@ TEST(InprocTest, LearnerAndTwoActorsInOneProcessLearnTheMockTask) {
 // make only what the learner uses. Without credit they run ahead and their surplus goes stale.
 TEST(InprocTest, CreditKeepsFastActorsFromMakingStaleSegments) {
   auto run = [](const std::string& tag, double slack) {
-    Json j = MockConfig(Json{{"credit_slack", slack}, {"max_policy_lag", 1},
-                             {"learner_queue_segments", 64}});
+    Json j = MockConfig(
+        Json{{"credit_slack", slack}, {"max_policy_lag", 1}, {"learner_queue_segments", 64}});
     j["ppo"]["num_epochs"] = 40;
     return RunInproc(tag, 12, 6, nullptr, j);
   };
@@ -146,6 +146,35 @@ TEST(InprocTest, CreditKeepsFastActorsFromMakingStaleSegments) {
   EXPECT_GT(off.actor_segments, on.actor_segments);  // ran ahead
 }
 
+// cluster.simulated_lag (issue 20): each segment acts with one of the newest lag + 1 weights
+// versions, so batches hold lagged segments; without it flow control keeps them (nearly) all
+// current. V-trace's counters see them.
+TEST(InprocTest, SimulatedLagMakesLaggedSegments) {
+  auto run = [](const std::string& tag, int lag) {
+    Json j = MockConfig(Json{{"simulated_lag", lag}, {"max_policy_lag", 4}});
+    j["ppo"]["vtrace"] = true;
+    return RunInproc(tag, 16, 1, nullptr, j);
+  };
+  auto late_lag = [](const InprocRun& r, const char* key) {
+    double s = 0;
+    int n = 0;
+    for (size_t i = r.rows.size() / 2; i < r.rows.size(); ++i, ++n)
+      s += r.rows[i][key].get<double>();
+    return n ? s / n : 0.0;
+  };
+  const InprocRun lagged = run("simlag-3", 3);
+  ASSERT_EQ(lagged.learner_updates, 16u);
+  // Uniform over 0..3 once four versions were seen: mean 1.5 (plus any natural lag).
+  EXPECT_GT(late_lag(lagged, "policy_lag_mean"), 0.9);
+  EXPECT_LT(late_lag(lagged, "policy_lag_mean"), 3.0);
+  int corrected = 0;
+  for (const Json& row : lagged.rows) corrected += row["ppo"]["lagged_samples"].get<int>();
+  EXPECT_GT(corrected, 0);
+  const InprocRun plain = run("simlag-0", 0);
+  ASSERT_EQ(plain.learner_updates, 16u);
+  EXPECT_LT(late_lag(plain, "policy_lag_mean"), 0.9);
+}
+
 TEST(InprocTest, ObservationStatisticsCountEachSampleOnce) {
   // The learner merges a segment's observation statistics on receipt; PPO's update must not merge
   // them again (it did: a checkpoint after N samples held count 2N, issue 17).
@@ -159,7 +188,7 @@ TEST(InprocTest, ObservationStatisticsCountEachSampleOnce) {
   const double count = c.trainer().model().obs_stats().count();
   const double trained = static_cast<double>(c.counters().samples());
   ASSERT_GT(trained, 0.0);
-  EXPECT_GE(count, trained);                                   // every trained sample was seen
+  EXPECT_GE(count, trained);  // every trained sample was seen
   EXPECT_LE(count, static_cast<double>(r.actor_segments) * 64 + 1.0);  // none counted twice
   EXPECT_LT(count, 1.5 * trained);
 }
@@ -222,10 +251,12 @@ TEST(InprocTest, ASubscriptionFloodCostsOneWeightResendPerInterval) {
   std::this_thread::sleep_for(std::chrono::milliseconds(400));
   stop = true;
   run.join();
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EXPECT_GT(subscriptions, 1000);
   EXPECT_GE(learner.stats().weights_republished, 1u);  // subscribers still get the weights
-  EXPECT_LE(static_cast<double>(learner.stats().weights_republished), seconds / 0.2 + 2) << subscriptions;
+  EXPECT_LE(static_cast<double>(learner.stats().weights_republished), seconds / 0.2 + 2)
+      << subscriptions;
 }
 
 // Fine-tuning (walk stage 2 from stage 1): a new run takes the policy weights and normalizer of

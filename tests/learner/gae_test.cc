@@ -123,5 +123,49 @@ TEST(RolloutTest, ValidateNamesTheBadField) {
   EXPECT_THROW(nan.Validate("seg"), ConfigError);
 }
 
+// V-trace (issue 20). Its targets from the paper's sum form (Espeholt et al. 2018, Eq. 1):
+//   v_s = V_s + sum_{t >= s} gamma^(t-s) (prod_{i=s}^{t-1} lambda c_i) rho_t (r_t + gamma V_{t+1} -
+//   V_t)
+// against the recursion, on a segment with a termination and a segment-end bootstrap.
+TEST(VtraceTest, MatchesTheSumFormOfTheTargets) {
+  const std::vector<float> r = {1.0f, 0.0f, 2.0f, -1.0f, 0.5f};
+  const std::vector<float> v_old = {9.0f, 9.0f, 9.0f, 9.0f, 9.0f};  // the acting network's
+  const std::vector<float> v = {0.5f, 0.2f, -0.3f, 0.1f, 0.4f};     // the learner's
+  const std::vector<int> term = {0, 1, 0, 0, 0};
+  const float boot = 0.7f;
+  const Rollout ro = Make(r, v_old, term, {0, 0, 0, 0, 0}, {0, 0, 0, 0, boot});
+  const std::vector<float> rho = {0.3f, 1.0f, 0.8f, 1.0f, 0.6f};
+  const std::vector<float> c = {0.5f, 0.9f, 0.2f, 1.0f, 0.7f};
+  std::vector<float> adv(5), ret(5);
+  ComputeVtrace(ro, nullptr, v.data(), rho.data(), c.data(), kGamma, kLambda, true, adv.data(),
+                ret.data());
+  // Episode boundaries: steps 0-1 (terminated at 1), steps 2-4 (bootstrapped at 4).
+  auto next_v = [&](int t) { return term[t] ? 0.0f : (t == 4 ? boot : v[t + 1]); };
+  auto end_of = [&](int s) { return s <= 1 ? 1 : 4; };
+  for (int s = 0; s < 5; ++s) {
+    double vs = v[s], disc = 1.0;
+    for (int t = s; t <= end_of(s); ++t) {
+      vs += disc * rho[t] * (r[t] + kGamma * next_v(t) - v[t]);
+      disc *= kGamma * kLambda * c[t];
+    }
+    EXPECT_NEAR(ret[s], vs, 1e-5) << s;
+    EXPECT_NEAR(adv[s], vs - v[s], 1e-5) << s;
+  }
+}
+
+TEST(VtraceTest, RatiosOfOneAndTheSegmentsValuesAreGaeBitForBit) {
+  const Rollout ro =
+      Make({1.0f, 0.0f, 2.0f, -1.0f}, kV, {0, 0, 1, 0}, {1, 0, 0, 0}, {0.3f, 0, 0, 0.7f});
+  const std::vector<float> ones(4, 1.0f);
+  std::vector<float> adv(4), ret(4);
+  ComputeVtrace(ro, nullptr, ro.values.data(), ones.data(), ones.data(), kGamma, kLambda, true,
+                adv.data(), ret.data());
+  const Out g = Gae(ro);
+  for (int t = 0; t < 4; ++t) {
+    EXPECT_EQ(adv[t], g.adv[t]) << t;
+    EXPECT_EQ(ret[t], g.ret[t]) << t;
+  }
+}
+
 }  // namespace
 }  // namespace perch

@@ -51,6 +51,20 @@ TEST(ClusterConfigTest, CreditFieldsAreCheckedByName) {
   }
 }
 
+TEST(ClusterConfigTest, SimulatedLagMustFitTheLearnersWindow) {
+  EXPECT_EQ(ClusterConfigFromJson(Json::object(), "cluster").simulated_lag, 0);
+  EXPECT_EQ(ClusterConfigFromJson(Json{{"simulated_lag", 2}}, "cluster").simulated_lag, 2);
+  for (const Json& bad : {Json{{"simulated_lag", -1}}, Json{{"simulated_lag", 3}},
+                          Json{{"simulated_lag", 5}, {"max_policy_lag", 4}}}) {
+    try {
+      ClusterConfigFromJson(bad, "cluster");
+      FAIL() << bad.dump();
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find("cluster.simulated_lag"), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST(ClusterConfigTest, TaskNamesRoundTrip) {
   for (const char* n : {"walk", "turn_left", "turn_right", "sit", "meta", "stand"}) {
     EXPECT_EQ(TaskName(TaskFromName(n, "t")), n);
