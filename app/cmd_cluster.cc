@@ -107,6 +107,7 @@ struct LearnerFlags {
   int metrics_port = 9100;
   std::string metrics_bind = "127.0.0.1";
   int64_t max_updates = 0;
+  int rank = 0;  // in a group of cluster.learners
   bool check_config = false;
 };
 
@@ -118,6 +119,11 @@ int RunLearner(const LearnerFlags& f) {
   if (f.run_dir.empty()) throw ConfigError("--run-dir: required");
   const ExperimentConfig cfg = LoadExperimentConfig(f.config, f.overrides.All());
   const LearnerSetup setup = MakeLearnerSetup(cfg);
+  if (f.rank < 0 || f.rank >= setup.cluster.learners) {
+    throw ConfigError("--rank: " + std::to_string(f.rank) + " is not in 0.." +
+                      std::to_string(setup.cluster.learners - 1) + " (cluster.learners " +
+                      std::to_string(setup.cluster.learners) + ")");
+  }
   if (f.check_config) {
     std::cerr << "perch learner: config " << f.config << " and flags OK\n";
     return 0;
@@ -133,10 +139,13 @@ int RunLearner(const LearnerFlags& f) {
   o.resume = f.resume;
   o.max_updates = f.max_updates;
   o.stop = &g_stop;
+  o.group_rank = f.rank;
   zmq::context_t ctx(1);
   try {
     LearnerService learner(ctx, setup, o);
     learner.Run();
+    // The last good state is saved; the exit status tells a supervisor the group broke.
+    if (learner.stop_reason() == "group_failed") throw GroupError(learner.group_error());
   } catch (const CheckpointError& e) {
     throw ConfigError(e.what());
   }
@@ -1075,6 +1084,8 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   l->add_option("--metrics-bind", lf->metrics_bind,
                 "address /metrics listens on (0.0.0.0: every interface, for a scraper)");
   l->add_option("--max-updates", lf->max_updates, "stop after this many updates (0: never)");
+  l->add_option("--rank", lf->rank,
+                "this learner's rank in a group of cluster.learners (0 binds cluster.group_address)");
   lf->overrides.Register(l);
   l->add_flag("--check-config", lf->check_config, "validate config and flags, then exit");
   l->callback([lf] {

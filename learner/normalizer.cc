@@ -175,7 +175,8 @@ RewardScalingConfig RewardScalingConfigFromJson(const Json& j, const std::string
 RewardScaler::RewardScaler(const RewardScalingConfig& config, float gamma)
     : config_(config), gamma_(gamma), return_stats_(1, config.initial_count) {}
 
-void RewardScaler::ScaleInPlace(uint64_t stream_id, float* rewards, const uint8_t* done, int n) {
+void RewardScaler::ScaleInPlace(uint64_t stream_id, float* rewards, const uint8_t* done, int n,
+                                RunningMeanStd* delta) {
   if (!config_.enabled) return;
   double& ret = streams_[stream_id];
   for (int t = 0; t < n; ++t) {
@@ -183,6 +184,7 @@ void RewardScaler::ScaleInPlace(uint64_t stream_id, float* rewards, const uint8_
     ret = ret * gamma_ + rewards[t];
     const float r = static_cast<float>(ret);
     return_stats_.Update(&r);
+    if (delta != nullptr) delta->Update(&r);
     const double s = std::sqrt(return_stats_.var()[0] + config_.eps);
     rewards[t] = std::clamp(static_cast<float>(rewards[t] / s), -config_.clip, config_.clip);
     if (config_.reset_at_episode_end && done != nullptr && done[t]) ret = 0.0;

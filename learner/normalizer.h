@@ -111,7 +111,10 @@ class RewardScaler {
 
   // Scales rewards[n] in place; done[t] (terminated or truncated) resets the accumulator after
   // step t only when reset_at_episode_end.
-  void ScaleInPlace(uint64_t stream_id, float* rewards, const uint8_t* done, int n);
+  // delta (optional, 1-d): also receives the returns added to the statistics (a learner group
+  // merges every member's delta into the same statistics).
+  void ScaleInPlace(uint64_t stream_id, float* rewards, const uint8_t* done, int n,
+                    RunningMeanStd* delta = nullptr);
 
   const RunningMeanStd& return_stats() const { return return_stats_; }
   RunningMeanStd& return_stats() { return return_stats_; }

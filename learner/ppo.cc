@@ -242,34 +242,67 @@ void PpoLearner::AddObsStats(const RunningMeanStd& delta) {
   obs_norm_.Refresh();
 }
 
+void PpoLearner::SeedShuffle(uint64_t seed, int rank) {
+  rng_ = Rng(seed ^ 0x5bd1e995a4f3c2e1ULL ^ (0x9e3779b97f4a7c15ULL * static_cast<uint64_t>(rank)));
+}
+
 UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
   const int obs_dim = model_.obs_dim();
   const int act_size = model_.action_size();
   int n = 0;
-  for (size_t i = 0; i < rollouts.size(); ++i) {
-    const std::string ctx = "rollout[" + std::to_string(i) + "]";
-    const Rollout& r = rollouts[i];
-    r.Validate(ctx);
-    if (r.obs_dim != obs_dim || r.action_size != act_size) {
-      throw ConfigError(ctx + ": obs_dim/action_size " + std::to_string(r.obs_dim) + "/" +
-                        std::to_string(r.action_size) + ", model has " + std::to_string(obs_dim) +
-                        "/" + std::to_string(act_size));
-    }
-    if (model_.config().kind == PolicyKind::kMeta) {
-      // A bad choice would otherwise throw halfway through the epochs.
-      const int c = model_.config().num_choices;
-      for (int t = 0; t < r.size(); ++t) {
-        const float ch = r.actions[static_cast<size_t>(t) * act_size];
-        if (!(ch >= 0 && ch <= c - 1 && ch == std::round(ch))) {
-          throw ConfigError(ctx + ".actions: meta choice " + std::to_string(ch) + " at step " +
-                            std::to_string(t) + " is not in 0.." + std::to_string(c - 1));
+  std::string refused;
+  try {
+    for (size_t i = 0; i < rollouts.size(); ++i) {
+      const std::string ctx = "rollout[" + std::to_string(i) + "]";
+      const Rollout& r = rollouts[i];
+      r.Validate(ctx);
+      if (r.obs_dim != obs_dim || r.action_size != act_size) {
+        throw ConfigError(ctx + ": obs_dim/action_size " + std::to_string(r.obs_dim) + "/" +
+                          std::to_string(r.action_size) + ", model has " + std::to_string(obs_dim) +
+                          "/" + std::to_string(act_size));
+      }
+      if (model_.config().kind == PolicyKind::kMeta) {
+        // A bad choice would otherwise throw halfway through the epochs.
+        const int c = model_.config().num_choices;
+        for (int t = 0; t < r.size(); ++t) {
+          const float ch = r.actions[static_cast<size_t>(t) * act_size];
+          if (!(ch >= 0 && ch <= c - 1 && ch == std::round(ch))) {
+            throw ConfigError(ctx + ".actions: meta choice " + std::to_string(ch) + " at step " +
+                              std::to_string(t) + " is not in 0.." + std::to_string(c - 1));
+          }
         }
       }
+      n += r.size();
     }
-    n += r.size();
+  } catch (const ConfigError& e) {
+    if (group_ == nullptr) throw;
+    refused = e.what();
+  }
+  // A group learns whether every member's batch passed, and its size, before anything changes.
+  std::vector<int> group_n(1, n);
+  if (group_ != nullptr) {
+    const std::vector<std::string> all =
+        group_->AllGather(refused.empty() ? "ok " + std::to_string(n) : "refused " + refused);
+    group_n.assign(all.size(), 0);
+    for (size_t r = 0; r < all.size(); ++r) {
+      if (all[r].rfind("ok ", 0) != 0) {
+        if (static_cast<int>(r) == group_->rank()) throw ConfigError(refused);
+        throw ConfigError("learner group: rank " + std::to_string(r) +
+                          " refused its batch, every member drops its own: " + all[r]);
+      }
+      group_n[r] = std::stoi(all[r].substr(3));
+    }
   }
   UpdateStats st;
-  if (n == 0) return st;
+  int min_n = n, group_total = 0;
+  for (int nr : group_n) {
+    min_n = std::min(min_n, nr);
+    group_total += nr;
+  }
+  if (min_n == 0) return st;
+  // A group merges every member's statistics after the batch, in rank order (below).
+  RunningMeanStd obs_delta(obs_dim, 0.0), ret_delta(1, 0.0);
+  const RunningMeanStd ret_before = reward_scaler_.return_stats();
 
   obs_.resize(obs_dim, n);
   actions_.resize(act_size, n);
@@ -285,11 +318,16 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
   for (const Rollout& r : rollouts) {
     const int t = r.size();
     if (t == 0) continue;
-    AddObsStats(r.obs_stats_delta);
+    if (group_ != nullptr) {
+      obs_delta.Merge(r.obs_stats_delta);
+    } else {
+      AddObsStats(r.obs_stats_delta);
+    }
     scaled_rewards_.assign(r.rewards.begin(), r.rewards.end());
     done.resize(t);
     for (int k = 0; k < t; ++k) done[k] = r.terminated[k] | r.truncated[k];
-    reward_scaler_.ScaleInPlace(r.stream_id, scaled_rewards_.data(), done.data(), t);
+    reward_scaler_.ScaleInPlace(r.stream_id, scaled_rewards_.data(), done.data(), t,
+                                group_ != nullptr ? &ret_delta : nullptr);
     seg_adv_.resize(t);
     seg_ret_.resize(t);
     obs_.middleCols(off, t) = Eigen::Map<const MatrixXf>(r.obs.data(), obs_dim, t);
@@ -330,7 +368,26 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
     }
     off += t;
   }
+  if (group_ != nullptr) {
+    proto::RunningStats po, pr;
+    obs_delta.ToProto(&po);
+    ret_delta.ToProto(&pr);
+    const std::vector<std::string> all =
+        group_->AllGather(PackStrings({po.SerializeAsString(), pr.SerializeAsString()}));
+    RunningMeanStd ret_stats = ret_before;
+    for (size_t r = 0; r < all.size(); ++r) {
+      const std::string ctx = "learner group: rank " + std::to_string(r) + "'s statistics";
+      const std::vector<std::string> two = UnpackStrings(all[r], ctx);
+      if (two.size() != 2 || !po.ParseFromString(two[0]) || !pr.ParseFromString(two[1])) {
+        throw ConfigError(ctx + ": malformed");
+      }
+      AddObsStats(RunningMeanStd::FromProto(po, obs_dim, ctx + ".obs"));
+      ret_stats.Merge(RunningMeanStd::FromProto(pr, 1, ctx + ".returns"));
+    }
+    reward_scaler_.return_stats() = ret_stats;
+  }
   st.num_samples = n;
+  st.group_samples = group_total;
   st.lagged_samples = lagged;
   if (lagged > 0) {
     st.vtrace_ratio_mean = static_cast<float>(sum_ratio / lagged);
@@ -347,7 +404,12 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
     st.explained_variance = var_ret > 0 ? static_cast<float>(1.0 - var_res / var_ret) : 0.0f;
   }
 
-  const int num_mb = std::max(1, std::min(ppo_.num_minibatches, n));
+  const int num_mb = std::max(1, std::min(ppo_.num_minibatches, min_n));
+  // Minibatch m of a group: every member's m-th part; the means are over their total size.
+  auto part = [num_mb](int m, int size) {
+    return static_cast<int>(static_cast<int64_t>(m + 1) * size / num_mb) -
+           static_cast<int>(static_cast<int64_t>(m) * size / num_mb);
+  };
   perm_.resize(n);
   for (int i = 0; i < n; ++i) perm_[i] = i;
   double acc_pg = 0, acc_vf = 0, acc_ent = 0, acc_kl = 0, acc_cf = 0, acc_gn = 0;
@@ -362,20 +424,32 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
       const int begin = static_cast<int>(static_cast<int64_t>(m) * n / num_mb);
       const int end = static_cast<int>(static_cast<int64_t>(m + 1) * n / num_mb);
       const int b = end - begin;
+      int mean_over = b;
+      if (group_ != nullptr) {
+        mean_over = 0;
+        for (int nr : group_n) mean_over += part(m, nr);
+      }
       PpoLossTerms lt;
       float gn;
       if (ppo_.threads > 1) {
         // Parts of the minibatch on threads of their own (at least kMinShardSamples each).
-        lt =
-            ColumnLoss(begin, b, std::max(1, std::min(ppo_.threads, b / kMinShardSamples)), params);
-        gn = ShardedStep();
+        lt = ColumnLoss(begin, b, std::max(1, std::min(ppo_.threads, b / kMinShardSamples)), params,
+                        mean_over);
+        if (group_ != nullptr) {
+          SumShards();
+          ReduceOverGroup(&lt);
+          gn = SerialStep(&grad_);
+        } else {
+          gn = ShardedStep();
+        }
       } else {
         ResizeShard(&mb_, b);
         GatherColumns(&mb_, begin, 0, b);
         if (ppo_.normalize_advantages && b > 1) NormalizeAdvantages(&mb_.adv);
         grad_.setZero();
         lt = PpoLoss(model_, params, ppo_, mb_.obs, mb_.act, mb_.logp, mb_.value, mb_.adv, mb_.ret,
-                     &ws_, grad_.data());
+                     &ws_, grad_.data(), mean_over);
+        if (group_ != nullptr) ReduceOverGroup(&lt);
         gn = SerialStep(&grad_);
       }
       params = model_.params().data();
@@ -432,7 +506,8 @@ void PpoLearner::NormalizeAdvantages(VectorXf* adv) const {
 // One minibatch on `parts` threads, each with a contiguous part of its columns and both networks:
 // gather, normalise (over the whole minibatch), evaluate, loss and backward in one round per
 // minibatch; ShardedStep then sums the parts' gradients in part order (same bits every run).
-PpoLossTerms PpoLearner::ColumnLoss(int begin, int b, int parts, const float* params) {
+PpoLossTerms PpoLearner::ColumnLoss(int begin, int b, int parts, const float* params,
+                                    int mean_over) {
   if (!pool_ || pool_->threads() != ppo_.threads)
     pool_ = std::make_shared<WorkerPool>(ppo_.threads);
   if (static_cast<int>(shards_.size()) < parts) shards_.resize(parts);
@@ -461,7 +536,7 @@ PpoLossTerms PpoLearner::ColumnLoss(int begin, int b, int parts, const float* pa
     if (normalize) sh.adv.array() = (sh.adv.array() - adv_mean) * adv_scale;
     model_.EvaluatePolicy(params, sh.obs, sh.act, &sh.ws.eval);
     model_.EvaluateValue(params, sh.obs, &sh.ws.eval);
-    sh.terms = PpoLossFromEval(ppo_, sh.logp, sh.value, sh.adv, sh.ret, &sh.ws, b);
+    sh.terms = PpoLossFromEval(ppo_, sh.logp, sh.value, sh.adv, sh.ret, &sh.ws, mean_over);
     sh.grad.setZero(np);
     model_.BackwardPolicy(params, sh.ws.dlogp, sh.ws.dent, &sh.ws.eval, sh.grad.data());
     model_.BackwardValue(params, sh.ws.dval, &sh.ws.eval, sh.grad.data());
@@ -477,6 +552,39 @@ PpoLossTerms PpoLearner::ColumnLoss(int begin, int b, int parts, const float* pa
     t.clip_fraction += u.clip_fraction;
   }
   return t;
+}
+
+void PpoLearner::SumShards() {
+  const int np = model_.num_params();
+  const int ranges = std::min(ppo_.threads, std::max(1, np / 1024));
+  const float* mask = model_.trainable_mask().data();
+  pool_->Run(ranges, [&](int r) {
+    const int lo = static_cast<int>(static_cast<int64_t>(r) * np / ranges);
+    const int hi = static_cast<int>(static_cast<int64_t>(r + 1) * np / ranges);
+    auto g = grad_.segment(lo, hi - lo);
+    g = shards_[0].grad.segment(lo, hi - lo);
+    for (int s = 1; s < active_shards_; ++s) g += shards_[s].grad.segment(lo, hi - lo);
+    g.array() *= Eigen::Map<const VectorXf>(mask + lo, hi - lo).array();
+  });
+}
+
+// One message per minibatch: the gradient and the loss terms (each member's already weighted by
+// its share of the group's minibatch, so the sums are the group's means).
+void PpoLearner::ReduceOverGroup(PpoLossTerms* t) {
+  const int np = model_.num_params();
+  reduce_buf_.resize(np + 6);
+  std::copy(grad_.data(), grad_.data() + np, reduce_buf_.begin());
+  const double terms[6] = {t->total,   t->policy_loss, t->value_loss,
+                           t->entropy, t->approx_kl,   t->clip_fraction};
+  for (int i = 0; i < 6; ++i) reduce_buf_[np + i] = static_cast<float>(terms[i]);
+  group_->AllReduceSum(reduce_buf_.data(), np + 6);
+  std::copy(reduce_buf_.begin(), reduce_buf_.begin() + np, grad_.data());
+  t->total = reduce_buf_[np];
+  t->policy_loss = reduce_buf_[np + 1];
+  t->value_loss = reduce_buf_[np + 2];
+  t->entropy = reduce_buf_[np + 3];
+  t->approx_kl = reduce_buf_[np + 4];
+  t->clip_fraction = reduce_buf_[np + 5];
 }
 
 // Mask, global-norm clip and the Adam step on one gradient, as the one-thread update does.

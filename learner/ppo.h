@@ -15,6 +15,7 @@
 #include "common/rng.h"
 #include "common/worker_pool.h"
 #include "learner/adam.h"
+#include "learner/collective.h"
 #include "learner/normalizer.h"
 #include "learner/policy.h"
 #include "learner/rollout.h"
@@ -90,6 +91,8 @@ struct UpdateStats {
   int lagged_samples = 0;
   float vtrace_ratio_mean = 0.0f;
   float vtrace_rho_clipped = 0.0f;
+  // In a learner group: the samples of this update over all members (else num_samples).
+  int group_samples = 0;
 };
 Json ToJson(const UpdateStats& s);
 
@@ -136,6 +139,18 @@ class PpoLearner {
   const Adam& optimizer() const { return adam_; }
   int64_t num_updates() const { return num_updates_; }
   int64_t num_samples() const { return num_samples_; }
+
+  // Data parallelism over a learner group (ours, issue 20, DD-PPO style; not owned, nullptr:
+  // alone). Each member updates on its own batch; every minibatch's gradient and loss terms are
+  // summed over the group (each member's share weighted by its samples), the observation and
+  // return statistics merged in rank order, so every member takes the same steps and keeps the
+  // same weights, Adam moments and normalizers. Advantages are normalized per member (DD-PPO).
+  // A member whose batch is refused makes every member drop its batch (ConfigError everywhere).
+  void SetCollective(Collective* group) { group_ = group; }
+  Collective* collective() const { return group_; }
+  // A member's own minibatch shuffling (rank > 0): the same seed would draw the same
+  // permutations on every member. Resuming restores the saved stream instead.
+  void SeedShuffle(uint64_t seed, int rank);
 
   // Merges an actor's raw-observation statistics into the master ones (Update() does this for
   // each rollout's obs_stats_delta; call it only for statistics that travel otherwise).
@@ -185,7 +200,11 @@ class PpoLearner {
   void ResizeShard(Shard* sh, int bs) const;
   void GatherColumns(Shard* sh, int lo, int k0, int k1) const;  // columns [k0, k1) of perm_[lo..]
   void NormalizeAdvantages(VectorXf* adv) const;  // (A - mean) / (std + eps) over the vector
-  PpoLossTerms ColumnLoss(int begin, int b, int parts, const float* params);
+  PpoLossTerms ColumnLoss(int begin, int b, int parts, const float* params, int mean_over);
+  void SumShards();                           // the parts' gradients into grad_, masked
+  void ReduceOverGroup(PpoLossTerms* terms);  // grad_ and terms summed over the group
+  Collective* group_ = nullptr;
+  std::vector<float> reduce_buf_;
   float ShardedStep();
   float SerialStep(VectorXf* grad);
   int active_shards_ = 0;

@@ -29,7 +29,10 @@ Json ToJson(const ClusterConfig& c) {
               {"target_window", c.target_window},
               {"credit_slack", c.credit_slack},
               {"credit_regrant_s", c.credit_regrant_s},
-              {"simulated_lag", c.simulated_lag}};
+              {"simulated_lag", c.simulated_lag},
+              {"learners", c.learners},
+              {"group_address", c.group_address},
+              {"group_timeout_s", c.group_timeout_s}};
 }
 
 namespace {
@@ -42,15 +45,35 @@ void CheckMin(const std::string& ctx, const char* field, double v, double lo) {
 }  // namespace
 
 ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
-  CheckKnownKeys(
-      j,
-      {"task", "segment_steps", "envs_per_actor", "max_policy_lag", "checkpoint_every", "keep_last",
-       "milestone_every", "heartbeat_s", "actor_timeout_s", "max_message_bytes",
-       "max_segment_steps", "max_wire_value", "reconnect_ivl_ms", "hierarchy_meta_period", "hierarchy_enabled",
-       "restart_backoff_ms", "learner_queue_segments", "init_from", "max_samples",
-       "target_success", "target_window", "credit_slack", "credit_regrant_s",
-       "simulated_lag"},
-      ctx);
+  CheckKnownKeys(j,
+                 {"task",
+                  "segment_steps",
+                  "envs_per_actor",
+                  "max_policy_lag",
+                  "checkpoint_every",
+                  "keep_last",
+                  "milestone_every",
+                  "heartbeat_s",
+                  "actor_timeout_s",
+                  "max_message_bytes",
+                  "max_segment_steps",
+                  "max_wire_value",
+                  "reconnect_ivl_ms",
+                  "hierarchy_meta_period",
+                  "hierarchy_enabled",
+                  "restart_backoff_ms",
+                  "learner_queue_segments",
+                  "init_from",
+                  "max_samples",
+                  "target_success",
+                  "target_window",
+                  "credit_slack",
+                  "credit_regrant_s",
+                  "simulated_lag",
+                  "learners",
+                  "group_address",
+                  "group_timeout_s"},
+                 ctx);
   ClusterConfig c;
   GetOptional(j, "task", c.task, ctx);
   GetOptional(j, "segment_steps", c.segment_steps, ctx);
@@ -76,6 +99,9 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "credit_slack", c.credit_slack, ctx);
   GetOptional(j, "credit_regrant_s", c.credit_regrant_s, ctx);
   GetOptional(j, "simulated_lag", c.simulated_lag, ctx);
+  GetOptional(j, "learners", c.learners, ctx);
+  GetOptional(j, "group_address", c.group_address, ctx);
+  GetOptional(j, "group_timeout_s", c.group_timeout_s, ctx);
   c.task = TaskName(TaskFromName(c.task, ctx + ".task"));  // one spelling from here on
   CheckMin(ctx, "segment_steps", c.segment_steps, 1);
   CheckMin(ctx, "envs_per_actor", c.envs_per_actor, 1);
@@ -109,6 +135,11 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
     throw ConfigError(ctx + ".simulated_lag: " + std::to_string(c.simulated_lag) +
                       " exceeds max_policy_lag " + std::to_string(c.max_policy_lag));
   }
+  if (c.learners < 1 || c.learners > 64) {
+    throw ConfigError(ctx + ".learners: must be in 1..64, got " + std::to_string(c.learners));
+  }
+  CheckMin(ctx, "group_timeout_s", c.group_timeout_s, 1.0);
+  if (c.learners > 1) CheckEndpoint(c.group_address, ctx + ".group_address");
   if (c.segment_steps > c.max_segment_steps) {
     throw ConfigError(ctx + ".segment_steps: " + std::to_string(c.segment_steps) +
                       " exceeds max_segment_steps " + std::to_string(c.max_segment_steps));

@@ -123,6 +123,14 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
   limits_.obs_dim = setup.policy.obs_dim;
   limits_.act_dim = setup.policy.action_size();
   ppo_ = std::make_unique<PpoLearner>(setup.policy, setup.ppo, setup.seed);
+  const int learners = setup.cluster.learners;
+  if (options_.group_rank < 0 || options_.group_rank >= learners) {
+    throw ConfigError("--rank: " + std::to_string(options_.group_rank) + " is not in 0.." +
+                      std::to_string(learners - 1) + " (cluster.learners " +
+                      std::to_string(learners) + ")");
+  }
+  // Same seed, same initial weights on every member; each shuffles its own batch differently.
+  if (options_.group_rank > 0) ppo_->SeedShuffle(setup.seed, options_.group_rank);
   MakeDir(options_.run_dir);
   Resume();
 
@@ -147,16 +155,43 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
   if (options_.metrics_port >= 0) {
     metrics_ = std::make_unique<MetricsServer>(options_.metrics_port, options_.metrics_bind);
   }
+  if (learners > 1) {
+    // Joins after binding, so that this member's actors connect while the others start.
+    GroupOptions g;
+    g.rank = options_.group_rank;
+    g.size = learners;
+    g.address =
+        options_.group_address.empty() ? setup.cluster.group_address : options_.group_address;
+    g.timeout_s = setup.cluster.group_timeout_s;
+    g.join_timeout_s = setup.cluster.group_timeout_s;
+    g.fingerprint = GroupFingerprint();
+    g.stop = options_.stop;
+    spdlog::info("learner: rank {} of {} joining the group at {} ({})", g.rank, g.size, g.address,
+                 g.fingerprint);
+    group_ = std::make_unique<ZmqGroup>(ctx, g);
+    ppo_->SetCollective(group_.get());
+    spdlog::info("learner: the group of {} learners is complete", learners);
+  }
   spdlog::info(
       "learner: task {} obs_dim {} action_size {} batch {} samples; PPO on {} thread(s), {} "
       "kernels; rollouts on {}, weights on {}, metrics on {}",
       setup_.cluster.task, limits_.obs_dim, limits_.act_dim, setup_.ppo.steps_per_update,
-      setup_.ppo.threads, ActiveDenseKernels().name,
-      options_.rollout_bind, options_.weights_bind,
+      setup_.ppo.threads, ActiveDenseKernels().name, options_.rollout_bind, options_.weights_bind,
       metrics_ ? ":" + std::to_string(metrics_->port()) + "/metrics" : "off");
 }
 
 LearnerService::~LearnerService() = default;
+
+std::string LearnerService::GroupFingerprint() const {
+  const std::string config = setup_.compat_key + "\n" + setup_.resolved_config.dump();
+  proto::ModelWeights w;
+  ppo_->ExportWeights(&w);
+  w.set_version(0);
+  const std::string weights = w.SerializeAsString();
+  return fmt::format("config={:08x} seed={} updates={} weights={:08x}",
+                     Crc32(config.data(), config.size()), setup_.seed, ppo_->num_updates(),
+                     Crc32(weights.data(), weights.size()));
+}
 
 void LearnerService::Resume() {
   const std::vector<uint64_t> present = store_.List();
@@ -369,8 +404,18 @@ bool LearnerService::HandleSegment(const proto::Segment& seg) {
     return false;
   }
   const uint64_t v = version();
-  // Observation statistics are valid data whatever the policy version was.
-  if (r.policy_version <= v) ppo_->AddObsStats(r.obs_stats_delta);
+  // Observation statistics are valid data whatever the policy version was. A group merges them
+  // inside the update, every member's in rank order, so that all keep the same normalizer.
+  if (r.policy_version <= v) {
+    if (group_) {
+      if (pending_obs_delta_.dim() != r.obs_stats_delta.dim()) {
+        pending_obs_delta_ = RunningMeanStd(r.obs_stats_delta.dim(), 0.0);
+      }
+      pending_obs_delta_.Merge(r.obs_stats_delta);
+    } else {
+      ppo_->AddObsStats(r.obs_stats_delta);
+    }
+  }
   // Merged here, once: PPO's Update() would merge the rollout's delta again (issue 17).
   r.obs_stats_delta.Reset(0.0);
   if (r.policy_version > v ||
@@ -412,6 +457,10 @@ void LearnerService::Train() {
   // The state before the update, to fall back to should the update leave anything non-finite.
   proto::LearnerState before;
   ppo_->ExportState(&before);
+  if (group_ && !batch_.empty()) {
+    batch_[0].obs_stats_delta = pending_obs_delta_;
+    pending_obs_delta_.Reset(0.0);
+  }
   try {
     u = ppo_->Update(batch_);
     proto::LearnerState after;
@@ -419,9 +468,22 @@ void LearnerService::Train() {
     if (const std::string bad = FirstNonFinite(after); !bad.empty()) {
       ppo_->ImportState(before, "the state before a non-finite update");
       ++nonfinite_updates_;
-      throw ConfigError("the update left " + bad + " non-finite; discarded, the last good weights "
+      throw ConfigError("the update left " + bad +
+                        " non-finite; discarded, the last good weights "
                         "stay published");
     }
+  } catch (const GroupStopped& e) {
+    // Another member stopped (or this one is stopping): the update did not happen anywhere.
+    ppo_->ImportState(before, "the state before the group stopped");
+    group_end_ = "group_stopped";
+    spdlog::warn("learner: {}; ending at update {}", e.what(), counters_.updates());
+    return;
+  } catch (const GroupError& e) {
+    ppo_->ImportState(before, "the state before the group failed");
+    group_end_ = "group_failed";
+    group_error_ = e.what();
+    spdlog::error("learner: {}; ending at update {}", e.what(), counters_.updates());
+    return;
   } catch (const ConfigError& e) {
     // Every segment was validated on receipt; should PPO still refuse the batch, drop it rather
     // than stop the run.
@@ -440,12 +502,14 @@ void LearnerService::Train() {
     batch_succeeded_ = 0;
     return;
   }
+  // A group counts the whole group's samples, so budgets and rates are the group's.
+  const uint64_t trained = group_ ? static_cast<uint64_t>(u.group_samples) : batch_samples_;
   counters_.set_updates(counters_.updates() + 1);
-  counters_.set_samples(counters_.samples() + batch_samples_);
+  counters_.set_samples(counters_.samples() + trained);
   const double now = MonotonicSeconds();
   if (progress_) progress_->OnUpdate(counters_.samples(), now);
   const double window = now - last_update_s_;
-  last_samples_per_s_ = window > 0 ? batch_samples_ / window : 0.0;
+  last_samples_per_s_ = window > 0 ? trained / window : 0.0;
   last_lag_mean_ = batch_segments_ ? batch_lag_sum_ / batch_segments_ : 0.0;
   if (!batch_returns_.empty()) last_return_mean_ = Mean(batch_returns_);
   WriteMetrics(u, now - t0, batch_samples_);
@@ -536,6 +600,15 @@ void LearnerService::WriteMetrics(const UpdateStats& u, double update_s, uint64_
        wire_samples_ ? static_cast<double>(wire_bytes_) / wire_samples_ : 0.0},
       {"time_s", train_time_base_s_ + MonotonicSeconds() - start_s_},
       {"ppo", ToJson(u)}};
+  if (group_) {
+    const GroupStats& g = group_->stats();
+    j["group"] = Json{{"rank", group_->rank()},
+                      {"size", group_->size()},
+                      {"operations", g.operations},
+                      {"bytes_sent", g.bytes_sent},
+                      {"bytes_received", g.bytes_received},
+                      {"wait_s", g.wait_s}};
+  }
   std::ofstream out(options_.run_dir + "/metrics.jsonl", std::ios::app);
   out << j.dump() << "\n";
   UpdateGauges();
@@ -544,15 +617,17 @@ void LearnerService::WriteMetrics(const UpdateStats& u, double update_s, uint64_
   if (now - last_console >= options_.console_every_s) {
     last_console = now;
     // What a user judges progress by first; then what an operator debugs with.
-    const std::string head = progress_ ? progress_->ConsoleLine(counters_.updates(), last_samples_per_s_)
-                                       : fmt::format("update {} | samples {}", counters_.updates(),
-                                                     counters_.samples());
+    const std::string head =
+        progress_ ? progress_->ConsoleLine(counters_.updates(), last_samples_per_s_)
+                  : fmt::format("update {} | samples {}", counters_.updates(), counters_.samples());
     spdlog::info(
         "{} | return {} | lag {:.2f} | policy loss {:.4f} value loss {:.4f} | stale {} rejected {} "
         "| actors {}",
-        head, j["return_mean"].is_null() ? std::string("-") : fmt::format("{:.1f}", j["return_mean"].get<double>()),
-        last_lag_mean_, u.policy_loss, u.value_loss, counters_.dropped_stale(), counters_.rejected(),
-        ActorsAlive());
+        head,
+        j["return_mean"].is_null() ? std::string("-")
+                                   : fmt::format("{:.1f}", j["return_mean"].get<double>()),
+        last_lag_mean_, u.policy_loss, u.value_loss, counters_.dropped_stale(),
+        counters_.rejected(), ActorsAlive());
   }
 }
 
@@ -649,9 +724,14 @@ void LearnerService::Run() {
     }
     // A drain after an update may fill the next batch at once: train it now, not after a poll.
     while (batch_samples_ >= static_cast<uint64_t>(setup_.ppo.steps_per_update) && !stopping() &&
+           group_end_.empty() &&
            (options_.max_updates == 0 ||
             counters_.updates() < static_cast<uint64_t>(options_.max_updates))) {
       Train();
+    }
+    if (!group_end_.empty()) {
+      stop_reason_ = stopping() ? "stopped" : group_end_;
+      break;
     }
     const double now = MonotonicSeconds();
     // Flow control: a batch that stopped filling (an actor left with its credit, or the actors
@@ -660,8 +740,7 @@ void LearnerService::Run() {
       if (now - std::max(last_segment_s_, last_grant_s_) >= setup_.cluster.credit_regrant_s) {
         ++stats_.credit_regrants;
         GrantCredit(/*stalled=*/true);
-      } else if (credit_pending_ &&
-                 now - last_grant_s_ >= options_.republish_min_interval_s) {
+      } else if (credit_pending_ && now - last_grant_s_ >= options_.republish_min_interval_s) {
         GrantCredit();  // actors joined; a flood of hellos costs one grant per interval
       }
     }
@@ -670,6 +749,8 @@ void LearnerService::Run() {
       last_gauges = now;
     }
   }
+  // The others stop at their next operation rather than wait for this one.
+  if (group_) group_->Leave();
   if (static_cast<int64_t>(counters_.updates()) != last_checkpoint_update_) SaveCheckpoint();
   UpdateGauges();
   progress_->OnUpdate(counters_.samples(), MonotonicSeconds());

@@ -20,8 +20,9 @@
 #include "learner/rollout.h"
 #include "learner/service/checkpoint.h"
 #include "learner/service/cluster_config.h"
-#include "learner/service/progress.h"
+#include "learner/service/group.h"
 #include "learner/service/metrics_http.h"
+#include "learner/service/progress.h"
 #include "learner/service/wire.h"
 
 namespace perch {
@@ -32,8 +33,8 @@ struct LearnerSetup {
   PolicyConfig policy;  // dims resolved from the env spec
   PpoConfig ppo;
   ClusterConfig cluster;
-  Json resolved_config;    // the whole experiment config, saved into the run dir and checkpoints
-  std::string compat_key;  // must match a checkpoint to resume from it
+  Json resolved_config;     // the whole experiment config, saved into the run dir and checkpoints
+  std::string compat_key;   // must match a checkpoint to resume from it
   double control_dt = 0.0;  // [s] per env step, for the console (0: lengths in steps)
 };
 
@@ -51,6 +52,10 @@ struct LearnerOptions {
   int64_t max_updates = 0;  // stop after this many updates in total (0: never)
   double console_every_s = 5.0;
   const std::atomic<bool>* stop = nullptr;  // set by a signal handler or a test
+  // This learner's rank in a group of cluster.learners (0..learners-1); group_address overrides
+  // cluster.group_address (tests: inproc://).
+  int group_rank = 0;
+  std::string group_address;
 };
 
 // Counts of what arrived, for metrics and tests.
@@ -81,10 +86,15 @@ class LearnerService {
   int metrics_port() const { return metrics_ ? metrics_->port() : -1; }
   const std::string& resumed_from() const { return resumed_from_; }
   std::string SaveCheckpoint();  // returns its path
-  // Why Run() returned: "max_samples", "target_success", "max_updates" or "stopped".
+  // Why Run() returned: "max_samples", "target_success", "max_updates", "stopped",
+  // "group_stopped" (another learner of the group stopped) or "group_failed" (group_error()).
   const std::string& stop_reason() const { return stop_reason_; }
   const RunProgress* progress() const { return progress_.get(); }
   uint64_t nonfinite_updates() const { return nonfinite_updates_; }
+  const std::string& group_error() const { return group_error_; }
+  const ZmqGroup* group() const { return group_.get(); }
+  // The group fingerprint: config, update count and weights, equal on every member that may join.
+  std::string GroupFingerprint() const;
 
  private:
   void HandleRollout(const zmq::message_t& msg);
@@ -92,7 +102,7 @@ class LearnerService {
   void Reject(WireReject kind, const std::string& why);
   void Publish(bool republish);
   void Train();
-  void DrainRollouts();            // queued segments into the batch, up to a full batch
+  void DrainRollouts();           // queued segments into the batch, up to a full batch
   double CreditPerActor() const;  // cluster.credit_slack: segments per actor for this version
   // A new grant, published with the weights; stalled: the batch stopped filling, so the grant
   // must grow.
@@ -126,9 +136,9 @@ class LearnerService {
   uint64_t batch_segments_ = 0;
   std::vector<double> batch_returns_;
   std::vector<double> batch_lengths_;
-  int batch_terminated_ = 0;  // episodes of the batch that ended by termination (fell)
-  int batch_judged_ = 0;      // ... that the task's success test judged (EpisodeStats.has_success)
-  int batch_succeeded_ = 0;   // ... and that passed it
+  int batch_terminated_ = 0;   // episodes of the batch that ended by termination (fell)
+  int batch_judged_ = 0;       // ... that the task's success test judged (EpisodeStats.has_success)
+  int batch_succeeded_ = 0;    // ... and that passed it
   uint64_t wire_samples_ = 0;  // samples in those messages, since this process started
   uint64_t wire_bytes_ = 0;    // bytes of accepted segment messages (wire_bytes_per_sample)
   std::map<uint64_t, double> actor_last_seen_;  // actor_instance -> monotonic seconds
@@ -154,6 +164,10 @@ class LearnerService {
   std::unique_ptr<RunProgress> progress_;  // created when Run() starts
   uint64_t nonfinite_updates_ = 0;         // updates discarded for non-finite results
   std::string stop_reason_;
+  std::unique_ptr<ZmqGroup> group_;   // cluster.learners > 1
+  RunningMeanStd pending_obs_delta_;  // group: received observation statistics, merged at update
+  std::string group_end_;             // set when the group stopped or failed: the run ends
+  std::string group_error_;
 };
 
 // Seconds on the monotonic clock.
