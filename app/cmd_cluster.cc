@@ -380,6 +380,10 @@ struct ClusterRunOptions {
   std::string dir;                         // run dir and logs go here
   int rollout_port = 0, weights_port = 0;  // 0: free ports picked here
   bool self_cpu = false;  // count this process's CPU as actors' (bench scale's in-process actors)
+  // A group of learners (the config's cluster.learners): rank r binds these ports (rank 0: the
+  // two above); actor i goes to learner i % learners. Empty: picked here.
+  int learners = 1;
+  std::vector<int> rollout_ports, weights_ports;
 };
 
 // One learner + actors on loopback. CPU time of every process is sampled whenever an update lands,
@@ -414,34 +418,52 @@ struct ClusterRun {
 };
 
 ClusterRun RunCluster(const ClusterRunOptions& o) {
+  // Rank 0's run dir: its metrics count the whole group's samples.
   const std::string run_dir = o.dir + "/run";
-  const int rp = o.rollout_port > 0 ? o.rollout_port : PickFreePort();
-  const int wp = o.weights_port > 0 ? o.weights_port : PickFreePort();
-  std::vector<std::string> largv = {o.exe,
-                                    "learner",
-                                    "--config",
-                                    o.config,
-                                    "--run-dir",
-                                    run_dir,
-                                    "--rollout-bind",
-                                    "tcp://127.0.0.1:" + std::to_string(rp),
-                                    "--weights-bind",
-                                    "tcp://127.0.0.1:" + std::to_string(wp),
-                                    "--metrics-port",
-                                    std::to_string(PickFreePort())};
-  if (o.max_updates > 0) {
-    largv.push_back("--max-updates");
-    largv.push_back(std::to_string(o.max_updates));
+  const int k = std::max(1, o.learners);
+  std::vector<int> rps = o.rollout_ports, wps = o.weights_ports;
+  if (static_cast<int>(rps.size()) != k || static_cast<int>(wps.size()) != k) {
+    rps.assign(k, 0);
+    wps.assign(k, 0);
+    for (int r = 0; r < k; ++r) {
+      rps[r] = r == 0 && o.rollout_port > 0 ? o.rollout_port : PickFreePort();
+      wps[r] = r == 0 && o.weights_port > 0 ? o.weights_port : PickFreePort();
+    }
   }
   const double t0 = MonotonicSeconds();
-  pid_t learner = Spawn(largv, o.dir + "/learner.log");
+  std::vector<pid_t> learners;
+  for (int r = 0; r < k; ++r) {
+    std::vector<std::string> largv = {o.exe,
+                                      "learner",
+                                      "--config",
+                                      o.config,
+                                      "--run-dir",
+                                      r == 0 ? run_dir : run_dir + "-rank" + std::to_string(r),
+                                      "--rollout-bind",
+                                      "tcp://127.0.0.1:" + std::to_string(rps[r]),
+                                      "--weights-bind",
+                                      "tcp://127.0.0.1:" + std::to_string(wps[r]),
+                                      "--metrics-port",
+                                      std::to_string(PickFreePort())};
+    if (k > 1) {
+      largv.push_back("--rank");
+      largv.push_back(std::to_string(r));
+    }
+    if (o.max_updates > 0) {
+      largv.push_back("--max-updates");
+      largv.push_back(std::to_string(o.max_updates));
+    }
+    learners.push_back(Spawn(
+        largv, o.dir + (r == 0 ? "/learner.log" : "/learner-rank" + std::to_string(r) + ".log")));
+  }
+  pid_t learner = learners[0];
   std::vector<pid_t> pids;
   for (int i = 0; i < o.actors; ++i) {
-    pids.push_back(
-        Spawn({o.exe, "actor", "--config", o.config, "--learner-host", "127.0.0.1",
-               "--rollout-port", std::to_string(rp), "--weights-port", std::to_string(wp),
-               "--actor-id", std::to_string(i), "--envs", std::to_string(o.envs)},
-              o.dir + "/actor-" + std::to_string(i) + ".log"));
+    pids.push_back(Spawn(
+        {o.exe, "actor", "--config", o.config, "--learner-host", "127.0.0.1", "--rollout-port",
+         std::to_string(rps[i % k]), "--weights-port", std::to_string(wps[i % k]), "--actor-id",
+         std::to_string(i), "--envs", std::to_string(o.envs)},
+        o.dir + "/actor-" + std::to_string(i) + ".log"));
   }
   ClusterRun r;
   size_t seen = 0;
@@ -453,7 +475,8 @@ ClusterRun RunCluster(const ClusterRunOptions& o) {
     for (std::string line; std::getline(mf, line);) lines += !line.empty();
     if (lines > seen) {
       // An exited learner is not reaped yet, so its /proc entry still holds its CPU time.
-      const double lcpu = ProcessCpuSeconds(learner);
+      double lcpu = 0.0;
+      for (pid_t l : learners) lcpu += l > 0 ? ProcessCpuSeconds(l) : 0.0;
       double cpu = lcpu;
       for (pid_t p : pids) cpu += ProcessCpuSeconds(p);
       if (o.self_cpu) cpu += ProcessCpuSeconds(::getpid());
@@ -478,6 +501,7 @@ ClusterRun RunCluster(const ClusterRunOptions& o) {
   for (pid_t p : pids) ::kill(p, SIGTERM);
   for (pid_t p : pids) Stop(p, 10.0);
   if (learner > 0) Stop(learner, 30.0);
+  for (int r = 1; r < k; ++r) Stop(learners[r], 30.0);
   r.rows = ReadMetricsRows(run_dir);
   // Updates that landed after the last poll have no CPU reading: leave them out.
   if (r.rows.size() > r.cpu_at_update.size()) r.rows.resize(r.cpu_at_update.size());
@@ -761,9 +785,10 @@ struct BenchScaleFlags {
   std::vector<int> actors = {1, 4, 16, 64, 256};
   double rate = 0.0;  // samples/s per synthetic actor; 0: one actor core's, measured
   double seconds = 20.0;
-  int envs = 0;         // streams per synthetic actor; 0: the config's envs_per_actor
-  int ppo_threads = 0;  // 0: the config's
-  int record = 16;      // segments recorded from the real env
+  int envs = 0;                     // streams per synthetic actor; 0: the config's envs_per_actor
+  int ppo_threads = 0;              // 0: the config's
+  int record = 16;                  // segments recorded from the real env
+  std::vector<int> learners = {1};  // group sizes (cluster.learners), each run at every actor count
   bool json = false;
 };
 
@@ -809,89 +834,116 @@ int RunBenchScale(const BenchScaleFlags& f) {
   const std::vector<RecordedSegment> recorded = RecordSegments(cfg, f.record);
   const ActorSetup actor_setup = MakeActorSetup(cfg);
   EnvSpec spec = actor_setup.make_env()->spec();
+  for (int k : f.learners) {
+    if (k < 1 || k > 64) throw ConfigError("--learners: group sizes must be in 1..64");
+  }
   Json runs = Json::array();
   bool ok = true;
   for (int n : f.actors) {
     if (n < 1 || n > 4096) throw ConfigError("--actors: counts must be in 1..4096");
-    if (g_stop.load()) break;
-    const std::string dir = MakeTempDir();
-    const std::string cfg_path = dir + "/config.json";
-    SaveJsonFileAtomic(cfg_path, base);
-    ClusterRunOptions o;
-    o.exe = SelfExe();
-    o.config = cfg_path;
-    o.actors = 0;
-    o.seconds = f.seconds;
-    o.dir = dir;
-    o.rollout_port = PickFreePort();
-    o.weights_port = PickFreePort();
-    o.self_cpu = true;
-    zmq::context_t ctx(2);
-    std::atomic<bool> stop{false};
-    std::vector<std::unique_ptr<ActorService>> actors;
-    std::vector<std::thread> threads;
-    for (int i = 0; i < n; ++i) {
-      ActorOptions ao;
-      ao.rollout_connect = "tcp://127.0.0.1:" + std::to_string(o.rollout_port);
-      ao.weights_connect = "tcp://127.0.0.1:" + std::to_string(o.weights_port);
-      ao.actor_id = static_cast<uint32_t>(i);
-      ao.num_envs = envs;
-      ao.stop = &stop;
-      ao.replay = &recorded;
-      ao.replay_samples_per_s = rate;
-      ao.replay_spec = spec;
-      actors.push_back(std::make_unique<ActorService>(ctx, actor_setup, ao));
-    }
-    for (auto& a : actors) threads.emplace_back([&a] { a->Run(); });
-    const double cpu0 = ProcessCpuSeconds(::getpid());
-    const ClusterRun run = RunCluster(o);
-    stop = true;
-    for (auto& t : threads) t.join();
-    Json r{{"actors", n}, {"offered_samples_per_s", n * rate}};
-    if (!run.ok()) {
-      r["error"] = "fewer than 3 updates (logs in " + dir + ")";
-      ok = false;
+    for (int k : f.learners) {
+      if (g_stop.load()) break;
+      const std::string dir = MakeTempDir();
+      const std::string cfg_path = dir + "/config.json";
+      Json run_cfg = base;
+      run_cfg["cluster"]["learners"] = k;
+      if (k > 1)
+        run_cfg["cluster"]["group_address"] = "tcp://127.0.0.1:" + std::to_string(PickFreePort());
+      SaveJsonFileAtomic(cfg_path, run_cfg);
+      ClusterRunOptions o;
+      o.exe = SelfExe();
+      o.config = cfg_path;
+      o.actors = 0;
+      o.seconds = f.seconds;
+      o.dir = dir;
+      o.learners = k;
+      for (int r = 0; r < k; ++r) {
+        o.rollout_ports.push_back(PickFreePort());
+        o.weights_ports.push_back(PickFreePort());
+      }
+      o.self_cpu = true;
+      zmq::context_t ctx(2);
+      std::atomic<bool> stop{false};
+      std::vector<std::unique_ptr<ActorService>> actors;
+      std::vector<std::thread> threads;
+      for (int i = 0; i < n; ++i) {
+        ActorOptions ao;
+        // Round-robin over the group: each learner owns 1/k of the actors.
+        ao.rollout_connect = "tcp://127.0.0.1:" + std::to_string(o.rollout_ports[i % k]);
+        ao.weights_connect = "tcp://127.0.0.1:" + std::to_string(o.weights_ports[i % k]);
+        ao.actor_id = static_cast<uint32_t>(i);
+        ao.num_envs = envs;
+        ao.stop = &stop;
+        ao.replay = &recorded;
+        ao.replay_samples_per_s = rate;
+        ao.replay_spec = spec;
+        actors.push_back(std::make_unique<ActorService>(ctx, actor_setup, ao));
+      }
+      for (auto& a : actors) threads.emplace_back([&a] { a->Run(); });
+      const double cpu0 = ProcessCpuSeconds(::getpid());
+      const ClusterRun run = RunCluster(o);
+      stop = true;
+      for (auto& t : threads) t.join();
+      Json r{{"actors", n}, {"learners", k}, {"offered_samples_per_s", n * rate}};
+      if (!run.ok()) {
+        r["error"] = "fewer than 3 updates (logs in " + dir + ")";
+        ok = false;
+        runs.push_back(r);
+        continue;
+      }
+      ActorCounters sum;
+      for (const auto& a : actors) {
+        const ActorCounters& c = a->counters();
+        sum.segments_sent += c.segments_sent;
+        sum.bytes_sent += c.bytes_sent;
+        sum.weights_messages += c.weights_messages;
+        sum.weights_bytes += c.weights_bytes;
+        sum.credit_waits += c.credit_waits;
+      }
+      const Json& a = run.rows[run.First()];
+      const Json& b = run.rows.back();
+      const double secs = run.Seconds();
+      const double stale = b["dropped_stale"].get<double>() - a["dropped_stale"].get<double>();
+      const double segs = b["segments"].get<double>() - a["segments"].get<double>();
+      const double wall = run.wall_s;
+      r["learner_samples_per_s"] = run.Samples() / secs;
+      r["learner_updates_per_s"] = (run.rows.size() - 1 - run.First()) / secs;
+      r["segments_per_s"] = (segs + stale) / secs;
+      r["drop_share"] = segs + stale > 0 ? stale / (segs + stale) : 0.0;
+      r["learner_cpu_cores"] = run.LearnerCpu() / secs;
+      r["synthetic_actor_cpu_cores"] = (ProcessCpuSeconds(::getpid()) - cpu0) / wall;
+      // Whole-run counters of the synthetic actors (start-up included), per wall second.
+      r["rollout_bytes_per_s"] = sum.bytes_sent / wall;
+      r["rollout_messages_per_s"] = sum.segments_sent / wall;
+      r["weights_bytes_per_s"] = sum.weights_bytes / wall;
+      r["weights_messages_per_s"] = sum.weights_messages / wall;
+      r["wire_bytes_per_sample"] = b["wire_bytes_per_sample"];
+      r["policy_lag_mean"] = b["policy_lag_mean"];
+      r["credit_waits"] = sum.credit_waits;
+      r["actor_cores_fed"] =
+          run.Samples() / secs / rate;  // how many actor cores the learner keeps up with
+      if (k > 1 && a.contains("group") && b.contains("group")) {
+        // Rank 0's side of the group: it receives every member's part and sends every reply.
+        const Json& ga = a["group"];
+        const Json& gb = b["group"];
+        r["group_wait_share"] = (gb["wait_s"].get<double>() - ga["wait_s"].get<double>()) / secs;
+        r["group_bytes_per_s"] =
+            (gb["bytes_sent"].get<double>() + gb["bytes_received"].get<double>() -
+             ga["bytes_sent"].get<double>() - ga["bytes_received"].get<double>()) /
+            secs;
+        r["group_operations_per_update"] =
+            (gb["operations"].get<double>() - ga["operations"].get<double>()) /
+            std::max<double>(1.0, run.rows.size() - 1 - run.First());
+      }
+      spdlog::info(
+          "bench scale: {} actors, {} learner(s) (offered {:.0f}/s): learner {:.0f} samples/s "
+          "({:.2f} cores), {:.1f}% stale, in {:.1f} MB/s, weights out {:.1f} MB/s",
+          n, k, n * rate, r["learner_samples_per_s"].get<double>(),
+          r["learner_cpu_cores"].get<double>(), 100 * r["drop_share"].get<double>(),
+          r["rollout_bytes_per_s"].get<double>() / 1e6,
+          r["weights_bytes_per_s"].get<double>() / 1e6);
       runs.push_back(r);
-      continue;
     }
-    ActorCounters sum;
-    for (const auto& a : actors) {
-      const ActorCounters& c = a->counters();
-      sum.segments_sent += c.segments_sent;
-      sum.bytes_sent += c.bytes_sent;
-      sum.weights_messages += c.weights_messages;
-      sum.weights_bytes += c.weights_bytes;
-      sum.credit_waits += c.credit_waits;
-    }
-    const Json& a = run.rows[run.First()];
-    const Json& b = run.rows.back();
-    const double secs = run.Seconds();
-    const double stale = b["dropped_stale"].get<double>() - a["dropped_stale"].get<double>();
-    const double segs = b["segments"].get<double>() - a["segments"].get<double>();
-    const double wall = run.wall_s;
-    r["learner_samples_per_s"] = run.Samples() / secs;
-    r["learner_updates_per_s"] = (run.rows.size() - 1 - run.First()) / secs;
-    r["segments_per_s"] = (segs + stale) / secs;
-    r["drop_share"] = segs + stale > 0 ? stale / (segs + stale) : 0.0;
-    r["learner_cpu_cores"] = run.LearnerCpu() / secs;
-    r["synthetic_actor_cpu_cores"] = (ProcessCpuSeconds(::getpid()) - cpu0) / wall;
-    // Whole-run counters of the synthetic actors (start-up included), per wall second.
-    r["rollout_bytes_per_s"] = sum.bytes_sent / wall;
-    r["rollout_messages_per_s"] = sum.segments_sent / wall;
-    r["weights_bytes_per_s"] = sum.weights_bytes / wall;
-    r["weights_messages_per_s"] = sum.weights_messages / wall;
-    r["wire_bytes_per_sample"] = b["wire_bytes_per_sample"];
-    r["policy_lag_mean"] = b["policy_lag_mean"];
-    r["credit_waits"] = sum.credit_waits;
-    r["actor_cores_fed"] =
-        run.Samples() / secs / rate;  // how many actor cores the learner keeps up with
-    spdlog::info(
-        "bench scale: {} actors (offered {:.0f}/s): learner {:.0f} samples/s ({:.2f} cores), "
-        "{:.1f}% stale, in {:.1f} MB/s, weights out {:.1f} MB/s",
-        n, n * rate, r["learner_samples_per_s"].get<double>(), r["learner_cpu_cores"].get<double>(),
-        100 * r["drop_share"].get<double>(), r["rollout_bytes_per_s"].get<double>() / 1e6,
-        r["weights_bytes_per_s"].get<double>() / 1e6);
-    runs.push_back(r);
   }
   const Json out{{"bench", "scale"},
                  {"config", f.config},
@@ -904,6 +956,103 @@ int RunBenchScale(const BenchScaleFlags& f) {
                  {"runs", runs}};
   std::cout << (f.json ? out.dump() : out.dump(2)) << std::endl;
   return ok ? 0 : 1;
+}
+
+// ---- perch bench group ----
+
+// The learner group's collective on its own (issue 20): k members (threads, each with its own
+// ZeroMQ context and TCP socket on loopback, as separate processes would have) all-reduce the
+// walk policy's gradient (its parameters + 6 loss terms), `ops` times. Reported per operation, with
+// the root's local summation of the same buffers as the baseline, and per PPO update (one
+// operation per minibatch and epoch, plus 2 all-gathers).
+struct BenchGroupFlags {
+  std::string config = "configs/default.json";
+  std::vector<int> learners = {2, 4};
+  int ops = 500;
+  bool json = false;
+};
+
+int RunBenchGroup(const BenchGroupFlags& f) {
+  LogToStderr("bench");
+  InstallStopHandlers();
+  if (f.ops < 10) throw ConfigError("--ops: must be >= 10");
+  const ExperimentConfig cfg = LoadExperimentConfig(f.config);
+  const LearnerSetup ls = MakeLearnerSetup(cfg);
+  const int n = ActorCritic(ls.policy, ls.seed).num_params() + 6;
+  const int ops_per_update = ls.ppo.num_epochs * ls.ppo.num_minibatches + 2;
+  Json runs = Json::array();
+  for (int k : f.learners) {
+    if (k < 2 || k > 64) throw ConfigError("--learners: group sizes must be in 2..64");
+    if (g_stop.load()) break;
+    const std::string address = "tcp://127.0.0.1:" + std::to_string(PickFreePort());
+    std::vector<double> seconds(k, 0.0);
+    std::vector<std::string> errors(k);
+    std::vector<GroupStats> stats(k);
+    std::vector<std::thread> threads;
+    for (int r = 0; r < k; ++r) {
+      threads.emplace_back([&, r] {
+        try {
+          zmq::context_t ctx(1);
+          GroupOptions o;
+          o.rank = r;
+          o.size = k;
+          o.address = address;
+          o.timeout_s = 60;
+          o.join_timeout_s = 60;
+          o.fingerprint = "bench";
+          o.stop = &g_stop;
+          ZmqGroup g(ctx, o);
+          std::vector<float> x(n);
+          for (int i = 0; i < n; ++i) x[i] = 1e-3f * static_cast<float>((i * 7 + r) % 101);
+          g.AllReduceSum(x.data(), n);  // warm-up: connections up, buffers allocated
+          const double t0 = MonotonicSeconds();
+          for (int i = 0; i < f.ops; ++i) g.AllReduceSum(x.data(), n);
+          seconds[r] = MonotonicSeconds() - t0;
+          stats[r] = g.stats();
+        } catch (const std::exception& e) {
+          errors[r] = e.what();
+        }
+      });
+    }
+    for (auto& t : threads) t.join();
+    for (const std::string& e : errors) {
+      if (!e.empty()) throw std::runtime_error("bench group: " + e);
+    }
+    // Baseline: the root's own arithmetic on the same buffers (k - 1 additions of n floats).
+    std::vector<std::vector<float>> parts(k, std::vector<float>(n, 0.5f));
+    const double b0 = MonotonicSeconds();
+    int local_ops = 0;
+    while (MonotonicSeconds() - b0 < 0.2) {
+      for (int r = 1; r < k; ++r) {
+        for (int i = 0; i < n; ++i) parts[0][i] += parts[r][i];
+      }
+      ++local_ops;
+    }
+    const double local_us = 1e6 * (MonotonicSeconds() - b0) / local_ops;
+    const double us = 1e6 * seconds[0] / f.ops;
+    Json r{{"learners", k},
+           {"floats", n},
+           {"bytes_per_member", 4 * n},
+           {"us_per_all_reduce", us},
+           {"local_sum_us", local_us},
+           {"ratio_to_local_sum", local_us > 0 ? us / local_us : 0.0},
+           {"root_bytes_per_s", (stats[0].bytes_sent + stats[0].bytes_received) / seconds[0]},
+           {"ops_per_update", ops_per_update},
+           {"ms_per_update", 1e-3 * us * ops_per_update}};
+    spdlog::info(
+        "bench group: {} members, {} floats: {:.0f} us per all-reduce ({:.1f}x the root's own "
+        "sum), {:.1f} ms per PPO update ({} operations)",
+        k, n, us, r["ratio_to_local_sum"].get<double>(), r["ms_per_update"].get<double>(),
+        ops_per_update);
+    runs.push_back(r);
+  }
+  const Json out{{"bench", "group"},
+                 {"config", f.config},
+                 {"ops", f.ops},
+                 {"cores", static_cast<int>(std::max(1u, std::thread::hardware_concurrency()))},
+                 {"runs", runs}};
+  std::cout << (f.json ? out.dump() : out.dump(2)) << std::endl;
+  return 0;
 }
 
 // ---- perch bench train ----
@@ -1084,8 +1233,9 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   l->add_option("--metrics-bind", lf->metrics_bind,
                 "address /metrics listens on (0.0.0.0: every interface, for a scraper)");
   l->add_option("--max-updates", lf->max_updates, "stop after this many updates (0: never)");
-  l->add_option("--rank", lf->rank,
-                "this learner's rank in a group of cluster.learners (0 binds cluster.group_address)");
+  l->add_option(
+      "--rank", lf->rank,
+      "this learner's rank in a group of cluster.learners (0 binds cluster.group_address)");
   lf->overrides.Register(l);
   l->add_flag("--check-config", lf->check_config, "validate config and flags, then exit");
   l->callback([lf] {
@@ -1153,9 +1303,25 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   sc->add_option("--envs", scf->envs, "streams per synthetic actor (default: the config's)");
   sc->add_option("--ppo-threads", scf->ppo_threads, "the learner's ppo.threads (default: config)");
   sc->add_option("--record", scf->record, "segments recorded from the real env and replayed");
+  sc->add_option("--learners", scf->learners,
+                 "learner group sizes (cluster.learners), e.g. 1,2; actors round-robin")
+      ->delimiter(',');
   sc->add_flag("--json", scf->json, "print one JSON object");
   sc->callback([scf] {
     const int rc = RunBenchScale(*scf);
+    if (rc != 0) throw CLI::RuntimeError(rc);
+  });
+
+  // perch bench group
+  auto gf = std::make_shared<BenchGroupFlags>();
+  CLI::App* g = bench.add_subcommand(
+      "group", "The learner group's gradient all-reduce over loopback TCP, per operation");
+  g->add_option("--config", gf->config, "experiment config (its policy's size; default: walk)");
+  g->add_option("--learners", gf->learners, "group sizes, e.g. 2,4")->delimiter(',');
+  g->add_option("--ops", gf->ops, "all-reduces timed per group size");
+  g->add_flag("--json", gf->json, "print one JSON object");
+  g->callback([gf] {
+    const int rc = RunBenchGroup(*gf);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });
 
