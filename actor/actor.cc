@@ -9,6 +9,7 @@
 
 #include "common/proto/model.pb.h"
 #include "learner/service/learner.h"
+#include "learner/service/security.h"
 #include "learner/service/wire.h"
 
 namespace perch {
@@ -53,6 +54,12 @@ ActorService::ActorService(zmq::context_t& ctx, const ActorSetup& setup,
   sub_.set(zmq::sockopt::maxmsgsize, static_cast<int64_t>(setup_.cluster.max_message_bytes));
   sub_.set(zmq::sockopt::subscribe, "");
   sub_.set(zmq::sockopt::linger, 0);
+  if (!setup_.cluster.insecure &&
+      (NeedsCurve(options_.rollout_connect) || NeedsCurve(options_.weights_connect))) {
+    const CurveKeys keys = ReadActorKeys(KeysDir(setup_.cluster));
+    MakeCurveClient(push_, keys);
+    MakeCurveClient(sub_, keys);
+  }
   push_.connect(options_.rollout_connect);
   sub_.connect(options_.weights_connect);
 }

@@ -33,6 +33,7 @@
 #include "learner/service/checkpoint.h"
 #include "learner/service/learner.h"
 #include "learner/service/run_summary.h"
+#include "learner/service/security.h"
 
 namespace perch {
 namespace {
@@ -64,6 +65,33 @@ uint32_t HostnameHash() {
   uint32_t h = 2166136261u;  // FNV-1a: stable across restarts of the same pod
   for (const char* p = host; *p; ++p) h = (h ^ static_cast<unsigned char>(*p)) * 16777619u;
   return h & 0x7fffffff;
+}
+
+// A run on one machine (perch train, the benches) without keys of its own gets a fresh pair in
+// dir, shared with its children through PERCH_KEYS_DIR; returns the directory used ("" when the
+// config is insecure).
+std::string EnsureLocalKeys(const ClusterConfig& c, const std::string& dir) {
+  if (c.insecure) return "";
+  const std::string have = KeysDir(c);
+  if (!have.empty()) return have;
+  if (!std::filesystem::exists(dir + "/learner.key")) WriteClusterKeys(dir);
+  const std::string abs = std::filesystem::absolute(dir).string();
+  ::setenv("PERCH_KEYS_DIR", abs.c_str(), 1);
+  return abs;
+}
+
+// ---- perch keygen ----
+struct KeygenFlags {
+  std::string out;
+};
+
+int RunKeygen(const KeygenFlags& f) {
+  if (f.out.empty()) throw ConfigError("--out: required");
+  WriteClusterKeys(f.out);
+  std::cout << "perch keygen: wrote " << f.out << "/{learner,actor}.{pub,key}; give the learner "
+            << "learner.key, learner.pub and actor.pub, the actors learner.pub, actor.pub and "
+               "actor.key (cluster.keys_dir or PERCH_KEYS_DIR)\n";
+  return 0;
 }
 
 // ---- perch learner ----
@@ -279,6 +307,11 @@ int RunTrain(TrainFlags f) {
   std::error_code ec;
   std::filesystem::create_directories(logs, ec);  // runs/ may not exist yet on a fresh clone
   if (ec) throw ConfigError("--run-dir " + f.run_dir + ": cannot create it: " + ec.message());
+  // Members only, on loopback too: a run without keys of its own makes them in its run dir (a
+  // resumed run reuses them) and hands them to its learner and actors.
+  if (const std::string keys = EnsureLocalKeys(cfg.cluster, f.run_dir + "/keys"); !keys.empty()) {
+    spdlog::info("train: CURVE keys in {}", keys);
+  }
   spdlog::info("train: learner + {} actors on loopback, run dir {}, logs in {}", f.actors,
                f.run_dir, logs);
   pid_t learner = Spawn(LearnerArgv(f, f.resume), "");
@@ -420,6 +453,7 @@ struct ClusterRun {
 ClusterRun RunCluster(const ClusterRunOptions& o) {
   // Rank 0's run dir: its metrics count the whole group's samples.
   const std::string run_dir = o.dir + "/run";
+  EnsureLocalKeys(LoadExperimentConfig(o.config).cluster, o.dir + "/keys");
   const int k = std::max(1, o.learners);
   std::vector<int> rps = o.rollout_ports, wps = o.weights_ports;
   if (static_cast<int>(rps.size()) != k || static_cast<int>(wps.size()) != k) {
@@ -850,6 +884,8 @@ int RunBenchScale(const BenchScaleFlags& f) {
       if (k > 1)
         run_cfg["cluster"]["group_address"] = "tcp://127.0.0.1:" + std::to_string(PickFreePort());
       SaveJsonFileAtomic(cfg_path, run_cfg);
+      // The synthetic actors are members too: the same keys as the learners.
+      EnsureLocalKeys(cfg.cluster, dir + "/keys");
       ClusterRunOptions o;
       o.exe = SelfExe();
       o.config = cfg_path;
@@ -1221,6 +1257,17 @@ int RunBenchTrain(const BenchTrainFlags& f) {
 }  // namespace
 
 void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
+  // perch keygen
+  auto kf = std::make_shared<KeygenFlags>();
+  CLI::App* kg =
+      root.add_subcommand("keygen", "Write the cluster's CURVE key pairs (learner, actors)");
+  kg->add_option("--out", kf->out, "directory for learner.{pub,key} and actor.{pub,key}")
+      ->required();
+  kg->callback([kf] {
+    const int rc = RunKeygen(*kf);
+    if (rc != 0) throw CLI::RuntimeError(rc);
+  });
+
   // perch learner
   auto lf = std::make_shared<LearnerFlags>();
   CLI::App* l = root.add_subcommand("learner", "Run the learner: PPO over rollouts from actors");

@@ -30,6 +30,8 @@ Json ToJson(const ClusterConfig& c) {
               {"credit_slack", c.credit_slack},
               {"credit_regrant_s", c.credit_regrant_s},
               {"simulated_lag", c.simulated_lag},
+              {"insecure", c.insecure},
+              {"keys_dir", c.keys_dir},
               {"learners", c.learners},
               {"group_address", c.group_address},
               {"group_timeout_s", c.group_timeout_s}};
@@ -70,6 +72,8 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
                   "credit_slack",
                   "credit_regrant_s",
                   "simulated_lag",
+                  "insecure",
+                  "keys_dir",
                   "learners",
                   "group_address",
                   "group_timeout_s"},
@@ -99,6 +103,8 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "credit_slack", c.credit_slack, ctx);
   GetOptional(j, "credit_regrant_s", c.credit_regrant_s, ctx);
   GetOptional(j, "simulated_lag", c.simulated_lag, ctx);
+  GetOptional(j, "insecure", c.insecure, ctx);
+  GetOptional(j, "keys_dir", c.keys_dir, ctx);
   GetOptional(j, "learners", c.learners, ctx);
   GetOptional(j, "group_address", c.group_address, ctx);
   GetOptional(j, "group_timeout_s", c.group_timeout_s, ctx);

@@ -65,6 +65,10 @@ struct ClusterConfig {
   // group_address, the others connect to it. An operation that has not completed on every member
   // within group_timeout_s fails (the members' batches fill at their actors' pace, so it must
   // exceed the slowest member's batch time). 1: one learner, no group.
+  // Who may talk to the learner (issue 17; learner/service/security.h): CURVE keys from keys_dir
+  // (else $PERCH_KEYS_DIR) on every tcp/ipc socket. insecure: no keys, for a trusted network only.
+  bool insecure = false;
+  std::string keys_dir;
   int learners = 1;
   std::string group_address = "tcp://127.0.0.1:5570";
   double group_timeout_s = 600.0;

@@ -150,6 +150,18 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
   weights_sock_.set(zmq::sockopt::xpub_verbose, 1);  // see every (re)subscription
   weights_sock_.set(zmq::sockopt::sndhwm, 100);
   weights_sock_.set(zmq::sockopt::linger, 0);
+  // Only cluster members: CURVE with the authorized actor keys on sockets other processes reach.
+  const bool curve = !setup.cluster.insecure &&
+                     (NeedsCurve(options_.rollout_bind) || NeedsCurve(options_.weights_bind));
+  if (curve) {
+    const CurveKeys keys = ReadLearnerKeys(KeysDir(setup.cluster));
+    zap_ = std::make_unique<ZapAuthenticator>(ctx, keys.authorized);
+    MakeCurveServer(rollout_sock_, keys);
+    MakeCurveServer(weights_sock_, keys);
+  } else if (setup.cluster.insecure) {
+    spdlog::warn("learner: cluster.insecure: anyone who reaches {} / {} can train or read it",
+                 options_.rollout_bind, options_.weights_bind);
+  }
   rollout_sock_.bind(options_.rollout_bind);
   weights_sock_.bind(options_.weights_bind);
   if (options_.metrics_port >= 0) {
@@ -657,6 +669,8 @@ void LearnerService::UpdateGauges() {
         "segments each actor may send per weights version (0: no flow control)");
   m.Set("perch_credit_regrants_total", stats_.credit_regrants,
         "fresh credit grants because the batch stopped filling", "counter");
+  m.Set("perch_auth_refused_total", static_cast<double>(auth_refused()),
+        "connections refused at the CURVE handshake (no authorized key)", "counter");
   m.Set("perch_nonfinite_updates_total", static_cast<double>(nonfinite_updates_),
         "PPO updates discarded because they left a non-finite weight or statistic", "counter");
 }

@@ -23,6 +23,7 @@
 #include "learner/service/group.h"
 #include "learner/service/metrics_http.h"
 #include "learner/service/progress.h"
+#include "learner/service/security.h"
 #include "learner/service/wire.h"
 
 namespace perch {
@@ -92,6 +93,8 @@ class LearnerService {
   const RunProgress* progress() const { return progress_.get(); }
   uint64_t nonfinite_updates() const { return nonfinite_updates_; }
   const std::string& group_error() const { return group_error_; }
+  // CURVE handshakes refused (clients without an authorized key); 0 when insecure.
+  uint64_t auth_refused() const { return zap_ ? zap_->refused() : 0; }
   const ZmqGroup* group() const { return group_.get(); }
   // The group fingerprint: config, update count and weights, equal on every member that may join.
   std::string GroupFingerprint() const;
@@ -164,7 +167,8 @@ class LearnerService {
   std::unique_ptr<RunProgress> progress_;  // created when Run() starts
   uint64_t nonfinite_updates_ = 0;         // updates discarded for non-finite results
   std::string stop_reason_;
-  std::unique_ptr<ZmqGroup> group_;   // cluster.learners > 1
+  std::unique_ptr<ZapAuthenticator> zap_;  // CURVE: answers the sockets' handshakes
+  std::unique_ptr<ZmqGroup> group_;        // cluster.learners > 1
   RunningMeanStd pending_obs_delta_;  // group: received observation statistics, merged at update
   std::string group_end_;             // set when the group stopped or failed: the run ends
   std::string group_error_;

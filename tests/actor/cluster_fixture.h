@@ -48,6 +48,8 @@ inline Json MockConfig(const Json& cluster = Json::object(), int steps_per_updat
            {"learning_rate", 0.001}}},
          {"cluster",
           {{"task", "stand"},
+           // The transport tests run without keys; tests/actor/curve_test.cc runs with them.
+           {"insecure", true},
            {"segment_steps", 64},
            {"envs_per_actor", 2},
            {"checkpoint_every", 2},
