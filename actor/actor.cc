@@ -14,6 +14,10 @@
 
 namespace perch {
 
+namespace {
+constexpr double kUnreachableLogS = 5.0;  // [s] between "cannot reach the learner" lines
+}  // namespace
+
 ActorService::ActorService(zmq::context_t& ctx, const ActorSetup& setup,
                            const ActorOptions& options)
     : setup_(setup),
@@ -67,14 +71,28 @@ ActorService::ActorService(zmq::context_t& ctx, const ActorSetup& setup,
 ActorService::~ActorService() = default;
 
 bool ActorService::Send(const std::string& bytes) {
+  const double t0 = MonotonicSeconds();
+  double last_log = t0;
   while (!Stopping()) {
     try {
       if (push_.send(zmq::buffer(bytes), zmq::send_flags::none)) {
         counters_.bytes_sent += bytes.size();
+        if (MonotonicSeconds() - t0 >= kUnreachableLogS) {
+          spdlog::info("actor: the learner at {} is reachable again after {:.0f} s",
+                       options_.rollout_connect, MonotonicSeconds() - t0);
+        }
         return true;
       }
     } catch (const zmq::error_t& e) {
       if (e.num() != EINTR) throw;
+    }
+    // An operator must see why nothing trains: say so every few seconds while it lasts.
+    if (const double now = MonotonicSeconds(); now - last_log >= kUnreachableLogS) {
+      last_log = now;
+      spdlog::warn(
+          "actor: cannot reach the learner at {} for {:.0f} s (not running, unreachable, or "
+          "refusing this actor's key); a segment is waiting",
+          options_.rollout_connect, now - t0);
     }
     // Timed out: the learner is away (restarting). Keep weights fresh meanwhile.
     PollWeights(0);

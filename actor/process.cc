@@ -9,8 +9,12 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <climits>
+#include <deque>
+#include <fstream>
+#include <iterator>
 #include <stdexcept>
 #include <thread>
 
@@ -95,6 +99,42 @@ int PickFreePort() {
   ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
   ::close(fd);
   return ntohs(addr.sin_port);
+}
+
+double RestartPolicy::OnFailure(const std::string& what, double now) {
+  if (now - started_at_ >= c_.healthy_s) {
+    in_a_row_ = 0;
+    identical_ = 0;
+    last_.clear();
+  }
+  ++in_a_row_;
+  identical_ = what == last_ ? identical_ + 1 : 1;
+  last_ = what;
+  if (c_.give_up_after > 0 && identical_ >= c_.give_up_after) return -1.0;
+  ++restarts_;
+  double delay = c_.base_s;
+  for (int i = 1; i < in_a_row_ && delay < c_.max_s; ++i) delay *= 2.0;
+  return std::min(delay, c_.max_s);
+}
+
+std::string LastLines(const std::string& path, int n) {
+  std::ifstream in(path);
+  std::deque<std::string> lines;
+  for (std::string l; std::getline(in, l);) {
+    lines.push_back(l);
+    if (static_cast<int>(lines.size()) > n) lines.pop_front();
+  }
+  std::string out;
+  for (const std::string& l : lines) out += "  " + l + "\n";
+  return out;
+}
+
+char ProcessState(pid_t pid) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+  std::string stat((std::istreambuf_iterator<char>(in)), {});
+  const size_t close = stat.rfind(')');
+  if (close == std::string::npos || close + 2 >= stat.size()) return '?';
+  return stat[close + 2];
 }
 
 }  // namespace perch

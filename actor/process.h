@@ -29,4 +29,42 @@ std::string DescribeStatus(int status);
 // A TCP port on 127.0.0.1 that was free a moment ago (bind to port 0, read it back, close).
 int PickFreePort();
 
+// When `perch train` restarts a child that died (issue 17): exponential backoff from base_s,
+// doubling per failure in a row up to max_s; a child that ran at least healthy_s before it died
+// starts the count again; give_up_after failures in a row with the same description (the exit
+// status, the "identical failure") end the restarts (0: never give up).
+struct RestartPolicyConfig {
+  double base_s = 0.5;
+  double max_s = 30.0;
+  int give_up_after = 5;
+  double healthy_s = 60.0;
+};
+
+class RestartPolicy {
+ public:
+  explicit RestartPolicy(const RestartPolicyConfig& c) : c_(c) {}
+  // The child started at `now`.
+  void OnStart(double now) { started_at_ = now; }
+  // The child died at `now` as `what` (DescribeStatus). Returns the delay before the next start,
+  // or -1: give up.
+  double OnFailure(const std::string& what, double now);
+  int failures_in_a_row() const { return in_a_row_; }
+  int identical_in_a_row() const { return identical_; }
+  int restarts() const { return restarts_; }
+
+ private:
+  RestartPolicyConfig c_;
+  double started_at_ = 0.0;
+  int in_a_row_ = 0;
+  int identical_ = 0;
+  int restarts_ = 0;
+  std::string last_;
+};
+
+// The last n lines of a text file ("" when it cannot be read), for a give-up message.
+std::string LastLines(const std::string& path, int n);
+
+// The process state letter from /proc/PID/stat ('R', 'S', 'T' for stopped, ...; '?' if unknown).
+char ProcessState(pid_t pid);
+
 }  // namespace perch

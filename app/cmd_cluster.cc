@@ -314,41 +314,122 @@ int RunTrain(TrainFlags f) {
   }
   spdlog::info("train: learner + {} actors on loopback, run dir {}, logs in {}", f.actors,
                f.run_dir, logs);
+  RestartPolicyConfig rpc;
+  rpc.base_s = cfg.cluster.restart_backoff_ms / 1000.0;
+  rpc.max_s = cfg.cluster.restart_backoff_max_ms / 1000.0;
+  rpc.give_up_after = cfg.cluster.max_identical_failures;
+  RestartPolicy learner_policy(rpc);
+  std::vector<RestartPolicy> actor_policy(f.actors, RestartPolicy(rpc));
   pid_t learner = Spawn(LearnerArgv(f, f.resume), "");
+  learner_policy.OnStart(MonotonicSeconds());
+  double learner_restart_at = -1.0;  // >= 0: a restart is due then
   std::vector<pid_t> actors(f.actors, -1);
   std::vector<double> restart_at(f.actors, 0.0);
-  std::vector<int> restarts(f.actors, 0);
+  std::vector<bool> gave_up(f.actors, false);
   for (int i = 0; i < f.actors; ++i) {
     actors[i] = Spawn(ActorArgv(f, i), logs + "/actor-" + std::to_string(i) + ".log");
+    actor_policy[i].OnStart(MonotonicSeconds());
   }
   int exit_code = 0;
-  const double backoff_s = cfg.cluster.restart_backoff_ms / 1000.0;
+  // Watchdog: the learner's metrics.jsonl grows by a line per update.
+  const std::string metrics_path = f.run_dir + "/metrics.jsonl";
+  auto metrics_size = [&] {
+    std::error_code e;
+    const auto n = std::filesystem::file_size(metrics_path, e);
+    return e ? uintmax_t{0} : n;
+  };
+  uintmax_t last_size = metrics_size();
+  double last_progress = MonotonicSeconds(), last_watch = 0.0, last_stall_warning = -1e9;
+  bool stopped_warned = false;
   while (!g_stop.load()) {
     int status = 0;
     const pid_t pid = ::waitpid(-1, &status, WNOHANG);
     const double now = MonotonicSeconds();
-    if (pid == learner) {
+    if (pid > 0 && pid == learner) {
       if (WIFEXITED(status) && (WEXITSTATUS(status) == 0 || WEXITSTATUS(status) == 2)) {
         exit_code = WEXITSTATUS(status);
         spdlog::info("train: learner {}; stopping actors", DescribeStatus(status));
         learner = -1;
         break;
       }
-      spdlog::error("train: learner {}; restarting it with --resume", DescribeStatus(status));
-      std::this_thread::sleep_for(std::chrono::duration<double>(backoff_s));
-      learner = Spawn(LearnerArgv(f, true), "");
+      learner = -1;
+      const double delay = learner_policy.OnFailure(DescribeStatus(status), now);
+      if (delay < 0) {
+        spdlog::error(
+            "train: learner {} {} times in a row; giving up (its output is above; "
+            "cluster.max_identical_failures)",
+            DescribeStatus(status), learner_policy.identical_in_a_row());
+        exit_code = 1;
+        break;
+      }
+      spdlog::error(
+          "train: learner {}; restarting it with --resume in {:.1f} s (failure {} in a row)",
+          DescribeStatus(status), delay, learner_policy.failures_in_a_row());
+      learner_restart_at = now + delay;
     } else if (pid > 0) {
       for (int i = 0; i < f.actors; ++i) {
         if (actors[i] != pid) continue;
-        spdlog::warn("train: actor {} {}; restarting it", i, DescribeStatus(status));
         actors[i] = -1;
-        restart_at[i] = now + backoff_s;
+        const std::string log = logs + "/actor-" + std::to_string(i) + ".log";
+        const double delay = actor_policy[i].OnFailure(DescribeStatus(status), now);
+        if (delay < 0) {
+          gave_up[i] = true;
+          spdlog::error(
+              "train: actor {} {} {} times in a row; not restarting it (cluster."
+              "max_identical_failures). The end of {}:\n{}",
+              i, DescribeStatus(status), actor_policy[i].identical_in_a_row(), log,
+              LastLines(log, 10));
+        } else {
+          spdlog::warn("train: actor {} {}; restarting it in {:.1f} s", i, DescribeStatus(status),
+                       delay);
+          restart_at[i] = now + delay;
+        }
       }
     }
+    if (learner < 0 && learner_restart_at >= 0 && now >= learner_restart_at) {
+      learner = Spawn(LearnerArgv(f, true), "");
+      learner_policy.OnStart(now);
+      learner_restart_at = -1.0;
+    }
+    int alive_or_due = 0;
     for (int i = 0; i < f.actors; ++i) {
-      if (actors[i] < 0 && now >= restart_at[i]) {
+      if (actors[i] < 0 && !gave_up[i] && now >= restart_at[i]) {
         actors[i] = Spawn(ActorArgv(f, i), logs + "/actor-" + std::to_string(i) + ".log");
-        ++restarts[i];
+        actor_policy[i].OnStart(now);
+      }
+      alive_or_due += !gave_up[i];
+    }
+    if (alive_or_due == 0) {
+      spdlog::error("train: every actor failed {} times in a row; stopping the run",
+                    rpc.give_up_after);
+      exit_code = 1;
+      break;
+    }
+    if (now - last_watch >= 1.0 && learner > 0) {
+      last_watch = now;
+      const uintmax_t size = metrics_size();
+      if (size != last_size) {
+        last_size = size;
+        last_progress = now;
+      }
+      const char state = ProcessState(learner);
+      if (state == 'T' && !stopped_warned) {
+        spdlog::warn(
+            "train: the learner (pid {}) is stopped (SIGSTOP?): no training until it "
+            "gets SIGCONT",
+            learner);
+        stopped_warned = true;
+      } else if (state != 'T') {
+        stopped_warned = false;
+      }
+      const double w = cfg.cluster.learner_watchdog_s;
+      if (w > 0 && now - last_progress >= w && now - last_stall_warning >= w) {
+        spdlog::warn(
+            "train: no update from the learner for {:.0f} s (pid {}, state {}); actors alive: {} "
+            "(cluster.learner_watchdog_s)",
+            now - last_progress, learner, state,
+            std::count_if(actors.begin(), actors.end(), [](pid_t a) { return a > 0; }));
+        last_stall_warning = now;
       }
     }
     if (pid <= 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));

@@ -22,6 +22,9 @@ Json ToJson(const ClusterConfig& c) {
               {"hierarchy_meta_period", c.hierarchy_meta_period},
               {"hierarchy_enabled", c.hierarchy_enabled},
               {"restart_backoff_ms", c.restart_backoff_ms},
+              {"restart_backoff_max_ms", c.restart_backoff_max_ms},
+              {"max_identical_failures", c.max_identical_failures},
+              {"learner_watchdog_s", c.learner_watchdog_s},
               {"learner_queue_segments", c.learner_queue_segments},
               {"init_from", c.init_from},
               {"max_samples", c.max_samples},
@@ -64,6 +67,9 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
                   "hierarchy_meta_period",
                   "hierarchy_enabled",
                   "restart_backoff_ms",
+                  "restart_backoff_max_ms",
+                  "max_identical_failures",
+                  "learner_watchdog_s",
                   "learner_queue_segments",
                   "init_from",
                   "max_samples",
@@ -95,6 +101,9 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "hierarchy_meta_period", c.hierarchy_meta_period, ctx);
   GetOptional(j, "hierarchy_enabled", c.hierarchy_enabled, ctx);
   GetOptional(j, "restart_backoff_ms", c.restart_backoff_ms, ctx);
+  GetOptional(j, "restart_backoff_max_ms", c.restart_backoff_max_ms, ctx);
+  GetOptional(j, "max_identical_failures", c.max_identical_failures, ctx);
+  GetOptional(j, "learner_watchdog_s", c.learner_watchdog_s, ctx);
   GetOptional(j, "learner_queue_segments", c.learner_queue_segments, ctx);
   GetOptional(j, "init_from", c.init_from, ctx);
   GetOptional(j, "max_samples", c.max_samples, ctx);
@@ -125,6 +134,9 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   CheckMin(ctx, "reconnect_ivl_ms", c.reconnect_ivl_ms, 1);
   CheckMin(ctx, "hierarchy_meta_period", c.hierarchy_meta_period, 1);
   CheckMin(ctx, "restart_backoff_ms", c.restart_backoff_ms, 0);
+  CheckMin(ctx, "restart_backoff_max_ms", c.restart_backoff_max_ms, c.restart_backoff_ms);
+  CheckMin(ctx, "max_identical_failures", c.max_identical_failures, 0);
+  CheckMin(ctx, "learner_watchdog_s", c.learner_watchdog_s, 0);
   CheckMin(ctx, "learner_queue_segments", c.learner_queue_segments, 1);
   if (c.max_samples < 0) throw ConfigError(ctx + ".max_samples: must be >= 0 (0: no budget)");
   if (!(c.target_success >= 0.0 && c.target_success <= 1.0)) {

@@ -29,7 +29,14 @@ struct ClusterConfig {
   int reconnect_ivl_ms = 200;        // ZeroMQ reconnect interval
   int hierarchy_meta_period = 30;    // control steps per meta decision (notes §4.7)
   bool hierarchy_enabled = false;    // run the 2 Hz meta policy over the subtasks
-  int restart_backoff_ms = 500;      // `perch train`: wait before restarting a dead actor
+  // `perch train` supervision (issue 17): a dead child is restarted after restart_backoff_ms,
+  // doubling per failure in a row up to restart_backoff_max_ms; after max_identical_failures
+  // failures in a row with the same exit status the launcher gives up on it (0: never). A learner
+  // that writes no update for learner_watchdog_s (or is stopped) is reported (0: no watchdog).
+  int restart_backoff_ms = 500;
+  int restart_backoff_max_ms = 30000;
+  int max_identical_failures = 5;
+  double learner_watchdog_s = 300.0;
   // Segments queued per actor connection at the learner (ZeroMQ receive high-water mark). Small,
   // so that a fast actor blocks instead of filling a queue whose tail would be stale on arrival.
   int learner_queue_segments = 16;

@@ -1,6 +1,9 @@
 // `perch train`: learner + N actor processes on loopback, actor restarts, SIGTERM shutdown.
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
 #include <signal.h>
+#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -125,15 +128,86 @@ TEST(TrainLauncherTest, CtrlCToTheWholeJobWritesFinalCheckpoint) {
   for (pid_t a : actors) ::kill(a, SIGCONT);
   int status = 0;
   ASSERT_TRUE(WaitFor(train, 60.0, &status)) << ReadFile(dir + "/train.log");
-  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0)
-      << DescribeStatus(status) << "\n" << ReadFile(dir + "/train.log");
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << DescribeStatus(status) << "\n"
+                                                             << ReadFile(dir + "/train.log");
   const std::vector<Json> rows = ReadMetrics(run);
   char name[64];
   std::snprintf(name, sizeof(name), "/checkpoints/ckpt-%010d.bin",
                 rows.back()["update"].get<int>());
   EXPECT_EQ(::access((run + name).c_str(), F_OK), 0) << run + name << "\n"
-                                                    << ReadFile(dir + "/train.log");
+                                                     << ReadFile(dir + "/train.log");
   for (pid_t c : children) EXPECT_NE(::kill(c, 0), 0) << "child " << c << " still running";
+}
+
+// A learner that cannot start (its metrics port is taken) is restarted with growing delays and
+// given up on after cluster.max_identical_failures identical failures: no endless restart loop.
+TEST(TrainLauncherTest, GivesUpOnALearnerThatFailsTheSameWayAgainAndAgain) {
+  if (PerchBin().empty()) GTEST_SKIP() << "PERCH_BIN not set";
+  const std::string dir = TempDir("train-giveup");
+  const std::string cfg =
+      WriteConfig(dir, MockConfig({{"restart_backoff_ms", 50}, {"max_identical_failures", 3}}));
+  const int busy = PickFreePort();
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_port = htons(busy);
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)), 0);
+  ASSERT_EQ(::listen(fd, 1), 0);
+  std::vector<std::string> argv = TrainArgv(cfg, dir + "/run");
+  argv.back() = std::to_string(busy);  // --metrics-port
+  const pid_t train = Spawn(argv, dir + "/train.log");
+  int status = 0;
+  const bool ended = WaitFor(train, 30.0, &status);
+  ::close(fd);
+  if (!ended) Stop(train, 5.0);
+  ASSERT_TRUE(ended) << "still restarting after 30 s:\n" << ReadFile(dir + "/train.log");
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 1) << DescribeStatus(status);
+  const std::string log = ReadFile(dir + "/train.log");
+  EXPECT_NE(log.find("3 times in a row; giving up"), std::string::npos) << log;
+  EXPECT_NE(log.find("failure 2 in a row"), std::string::npos) << log;
+}
+
+// A stopped learner (SIGSTOP) is reported, and an actor that cannot reach its learner says so.
+TEST(TrainLauncherTest, ReportsAStoppedLearnerAndActorsThatCannotReachIt) {
+  if (PerchBin().empty()) GTEST_SKIP() << "PERCH_BIN not set";
+  const std::string dir = TempDir("train-stopped");
+  const std::string cfg = WriteConfig(dir, MockConfig({{"learner_watchdog_s", 2.0}}));
+  const std::string run = dir + "/run";
+  const pid_t train = Spawn(TrainArgv(cfg, run), dir + "/train.log");
+  ASSERT_TRUE(WaitUntil([&] { return ReadMetrics(run).size() >= 2; }, 30.0))
+      << ReadFile(dir + "/train.log");
+  pid_t learner = -1;
+  for (pid_t c : Children(train)) {
+    if (Cmdline(c).find(" learner ") != std::string::npos) learner = c;
+  }
+  ASSERT_GT(learner, 0);
+  ::kill(learner, SIGSTOP);
+  const bool seen = WaitUntil(
+      [&] {
+        const std::string log = ReadFile(dir + "/train.log");
+        return log.find("is stopped (SIGSTOP?)") != std::string::npos &&
+               log.find("no update from the learner for") != std::string::npos;
+      },
+      20.0);
+  ::kill(learner, SIGCONT);
+  ::kill(train, SIGTERM);
+  int status = 0;
+  WaitFor(train, 60.0, &status);
+  EXPECT_TRUE(seen) << ReadFile(dir + "/train.log");
+
+  // An actor alone, its learner nowhere: a line every few seconds.
+  const pid_t actor =
+      Spawn({PerchBin(), "actor", "--config", cfg, "--learner-host", "127.0.0.1", "--rollout-port",
+             std::to_string(PickFreePort()), "--weights-port", std::to_string(PickFreePort())},
+            dir + "/actor.log");
+  const bool said = WaitUntil(
+      [&] {
+        return ReadFile(dir + "/actor.log").find("cannot reach the learner") != std::string::npos;
+      },
+      15.0);
+  Stop(actor, 5.0);
+  EXPECT_TRUE(said) << ReadFile(dir + "/actor.log");
 }
 
 }  // namespace
