@@ -107,6 +107,28 @@ void KeepChangedConfig(const std::string& config_path, const Json& record, uint6
 
 }  // namespace
 
+// A process killed mid-write leaves a last line without its newline; rows appended after a
+// restart would be glued to it. Cut the torn tail (it never was a whole row).
+void RepairMetricsFile(const std::string& path) {
+  std::error_code ec;
+  const auto size = std::filesystem::file_size(path, ec);
+  if (ec || size == 0) return;
+  std::string text;
+  {
+    std::ifstream in(path, std::ios::binary);
+    text.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  if (text.empty() || text.back() == '\n') return;
+  const size_t keep = text.rfind('\n') == std::string::npos ? 0 : text.rfind('\n') + 1;
+  std::filesystem::resize_file(path, keep, ec);
+  if (ec) {
+    spdlog::error("learner: {}: cannot cut its torn last line: {}", path, ec.message());
+  } else {
+    spdlog::warn("learner: {}: cut a torn last line ({} bytes, from a run stopped mid-write)", path,
+                 text.size() - keep);
+  }
+}
+
 LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
                                const LearnerOptions& options)
     : setup_(setup),
@@ -132,6 +154,7 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
   // Same seed, same initial weights on every member; each shuffles its own batch differently.
   if (options_.group_rank > 0) ppo_->SeedShuffle(setup.seed, options_.group_rank);
   MakeDir(options_.run_dir);
+  RepairMetricsFile(options_.run_dir + "/metrics.jsonl");
   Resume();
 
   // Every run (and every restart of it) records its resolved config and seed. A resume with a
@@ -373,6 +396,25 @@ void LearnerService::Reject(WireReject kind, const std::string& why) {
   }
 }
 
+void LearnerService::SeeActor(uint64_t instance, double now) {
+  auto it = actor_last_seen_.find(instance);
+  if (it != actor_last_seen_.end()) {
+    it->second = now;
+    return;
+  }
+  // A flood of made-up instance ids must not grow memory without bound: forget the silent ones,
+  // and past the cap track no new ones until some fall silent.
+  if (actor_last_seen_.size() >= kMaxTrackedActors) PruneActors(now);
+  if (actor_last_seen_.size() >= kMaxTrackedActors) return;
+  actor_last_seen_[instance] = now;
+}
+
+void LearnerService::PruneActors(double now) {
+  for (auto it = actor_last_seen_.begin(); it != actor_last_seen_.end();) {
+    it = now - it->second > setup_.cluster.actor_timeout_s ? actor_last_seen_.erase(it) : ++it;
+  }
+}
+
 void LearnerService::HandleRollout(const zmq::message_t& msg) {
   ++stats_.messages;
   proto::ActorMessage m;
@@ -383,20 +425,20 @@ void LearnerService::HandleRollout(const zmq::message_t& msg) {
   switch (m.body_case()) {
     case proto::ActorMessage::kHello:
       ++stats_.hellos;
-      actor_last_seen_[m.hello().actor_instance()] = now;
+      SeeActor(m.hello().actor_instance(), now);
       credit_pending_ = setup_.cluster.credit_slack > 0;  // the share per actor changed
       spdlog::info("learner: actor {} ({}, {} envs of {}) joined", m.hello().actor_id(),
                    m.hello().hostname(), m.hello().num_envs(), m.hello().env_name());
       break;
     case proto::ActorMessage::kHeartbeat:
       ++stats_.heartbeats;
-      actor_last_seen_[m.heartbeat().actor_instance()] = now;
+      SeeActor(m.heartbeat().actor_instance(), now);
       break;
     case proto::ActorMessage::kEndPoses:
       ++stats_.end_pose_batches;  // Stored by the transition fine-tuning stage (not yet used).
       break;
     case proto::ActorMessage::kSegment:
-      actor_last_seen_[m.segment().actor_instance()] = now;
+      SeeActor(m.segment().actor_instance(), now);
       if (HandleSegment(m.segment())) {
         wire_bytes_ += msg.size();
         wire_samples_ += m.segment().rollout().rewards_size();
@@ -759,6 +801,7 @@ void LearnerService::Run() {
       }
     }
     if (now - last_gauges >= 1.0) {
+      PruneActors(now);
       UpdateGauges();
       last_gauges = now;
     }

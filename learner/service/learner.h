@@ -94,6 +94,9 @@ class LearnerService {
   uint64_t nonfinite_updates() const { return nonfinite_updates_; }
   const std::string& group_error() const { return group_error_; }
   // CURVE handshakes refused (clients without an authorized key); 0 when insecure.
+  static constexpr size_t kMaxTrackedActors = 65536;
+  // Actor instances tracked for liveness (bounded by kMaxTrackedActors).
+  size_t tracked_actors() const { return actor_last_seen_.size(); }
   uint64_t auth_refused() const { return zap_ ? zap_->refused() : 0; }
   const ZmqGroup* group() const { return group_.get(); }
   // The group fingerprint: config, update count and weights, equal on every member that may join.
@@ -113,6 +116,8 @@ class LearnerService {
   void WriteMetrics(const UpdateStats& u, double dt_s, uint64_t batch_samples);
   void UpdateGauges();
   int ActorsAlive() const;
+  void SeeActor(uint64_t instance, double now);  // liveness, bounded (kMaxTrackedActors)
+  void PruneActors(double now);                  // forgets actors silent for actor_timeout_s
   void Resume();
   void InitFrom();  // cluster.init_from, for a new run
 
@@ -173,6 +178,9 @@ class LearnerService {
   std::string group_end_;             // set when the group stopped or failed: the run ends
   std::string group_error_;
 };
+
+// Cuts a torn last line (no newline) off a metrics.jsonl, so rows appended later stay parseable.
+void RepairMetricsFile(const std::string& path);
 
 // Seconds on the monotonic clock.
 double MonotonicSeconds();

@@ -446,5 +446,36 @@ TEST(InprocTest, InitFromRefusesMissingCorruptOrMismatchedCheckpoints) {
   EXPECT_EQ(ReadCheckpointFile(src_ckpt).counters().updates(), 2u);
 }
 
+// A heartbeat flood with made-up instance ids (issue 17) must not grow the learner's memory without
+// bound, and silent instances are forgotten after actor_timeout_s.
+TEST(InprocTest, AHeartbeatFloodIsBoundedAndForgotten) {
+  Json j = MockConfig(Json{{"actor_timeout_s", 0.5}, {"learner_queue_segments", 100000}});
+  const ExperimentConfig cfg = ExperimentConfigFromJson(j, "flood");
+  LearnerOptions lo = InprocOptions("flood", TempDir("flood") + "/run");
+  std::atomic<bool> stop{false};
+  lo.stop = &stop;
+  zmq::context_t ctx(1);
+  LearnerService learner(ctx, MakeLearnerSetup(cfg), lo);
+  std::thread run([&] { learner.Run(); });
+  zmq::socket_t push(ctx, zmq::socket_type::push);
+  push.set(zmq::sockopt::sndhwm, 0);
+  push.connect(lo.rollout_bind);
+  const size_t n = LearnerService::kMaxTrackedActors + 5000;
+  for (size_t i = 0; i < n; ++i) {
+    proto::ActorMessage m;
+    m.set_wire_version(proto::WIRE_VERSION_CURRENT);
+    m.mutable_heartbeat()->set_actor_instance(0x1234567800000000ULL + i);
+    push.send(zmq::buffer(m.SerializeAsString()), zmq::send_flags::none);
+  }
+  EXPECT_TRUE(WaitUntil([&] { return learner.stats().heartbeats >= n; }, 60.0))
+      << learner.stats().heartbeats;
+  EXPECT_LE(learner.tracked_actors(), LearnerService::kMaxTrackedActors);
+  // Silent for longer than actor_timeout_s: pruned (once a second).
+  EXPECT_TRUE(WaitUntil([&] { return learner.tracked_actors() == 0; }, 5.0))
+      << learner.tracked_actors();
+  stop = true;
+  run.join();
+}
+
 }  // namespace
 }  // namespace perch

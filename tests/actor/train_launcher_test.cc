@@ -196,10 +196,25 @@ TEST(TrainLauncherTest, ReportsAStoppedLearnerAndActorsThatCannotReachIt) {
   WaitFor(train, 60.0, &status);
   EXPECT_TRUE(seen) << ReadFile(dir + "/train.log");
 
-  // An actor alone, its learner nowhere: a line every few seconds.
+  // An actor alone, its learner nowhere: a line every few seconds. Its ports are held (bound, not
+  // listening) so that no other test's learner can take them meanwhile.
+  auto hold = [](int* port) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = 0;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a));
+    socklen_t len = sizeof(a);
+    ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
+    *port = ntohs(a.sin_port);
+    return fd;
+  };
+  int rp = 0, wp = 0;
+  const int fd_r = hold(&rp), fd_w = hold(&wp);
   const pid_t actor =
       Spawn({PerchBin(), "actor", "--config", cfg, "--learner-host", "127.0.0.1", "--rollout-port",
-             std::to_string(PickFreePort()), "--weights-port", std::to_string(PickFreePort())},
+             std::to_string(rp), "--weights-port", std::to_string(wp)},
             dir + "/actor.log");
   const bool said = WaitUntil(
       [&] {
@@ -207,6 +222,8 @@ TEST(TrainLauncherTest, ReportsAStoppedLearnerAndActorsThatCannotReachIt) {
       },
       15.0);
   Stop(actor, 5.0);
+  ::close(fd_r);
+  ::close(fd_w);
   EXPECT_TRUE(said) << ReadFile(dir + "/actor.log");
 }
 

@@ -4,11 +4,13 @@
 
 #include <cstdlib>
 #include <filesystem>
-#include <iterator>
-#include <utility>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <string>
+#include <utility>
+
+#include "learner/service/learner.h"
 
 namespace perch {
 namespace {
@@ -32,13 +34,17 @@ std::string RunDir(const std::string& tag, const std::string& metrics) {
   return d;
 }
 
+std::string ReadAll(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
 // A run resumed from its update-2 checkpoint repeats update 3: the curve keeps one row per update
 // (the later one) and the summary reads the last row.
 TEST(RunSummary, ResumedRunGivesOneRowPerUpdateAndItsCsv) {
-  const std::string d = RunDir("resumed", Row(1, 1.0, "1.5", 1) + "\n" + Row(2, 2.0, "null") +
-                                              "\n" + Row(3, 3.0, "9.0") + "\n" +
-                                              Row(3, 3.5, "4.0") + "\n" + Row(4, 4.5, "6.0") +
-                                              "\n");
+  const std::string d = RunDir(
+      "resumed", Row(1, 1.0, "1.5", 1) + "\n" + Row(2, 2.0, "null") + "\n" + Row(3, 3.0, "9.0") +
+                     "\n" + Row(3, 3.5, "4.0") + "\n" + Row(4, 4.5, "6.0") + "\n");
   std::ofstream(d + "/checkpoints/ckpt-0000000004.bin") << "x";
   std::ofstream(d + "/checkpoints/ckpt-0000000002.bin") << "x";
   std::ofstream(d + "/config.json") << "{\"seed\": 5}";
@@ -91,6 +97,24 @@ TEST(RunSummary, TornLastLineIsIgnoredDamageElsewhereIsNamed) {
     EXPECT_NE(std::string(e.what()).find("'samples'"), std::string::npos) << e.what();
   }
   EXPECT_THROW(SummarizeRun(::testing::TempDir() + "/no_such_run"), ConfigError);
+}
+
+// A run stopped mid-write, then resumed: the learner cuts the torn tail before appending, so the
+// rows of the resumed run stay whole and the summary covers both parts (issue 17).
+TEST(RunSummary, AResumeAfterATornLineKeepsTheRunReadable) {
+  const std::string d =
+      RunDir("torn-resume", Row(1, 1.0, "1") + "\n" + Row(2, 2.0, "2") + "\n{\"upd");
+  RepairMetricsFile(d + "/metrics.jsonl");
+  std::ofstream(d + "/metrics.jsonl", std::ios::app) << Row(3, 3.0, "3") << "\n";
+  const RunSummary s = SummarizeRun(d);
+  EXPECT_EQ(s.updates, 3);
+  EXPECT_EQ(s.curve.size(), 3u);
+  // Whole files are left alone.
+  const std::string whole = RunDir("whole", Row(1, 1.0, "1") + "\n");
+  const std::string before = ReadAll(whole + "/metrics.jsonl");
+  RepairMetricsFile(whole + "/metrics.jsonl");
+  EXPECT_EQ(ReadAll(whole + "/metrics.jsonl"), before);
+  RepairMetricsFile(whole + "/no-such-file.jsonl");  // nothing to do, no error
 }
 
 // PNG width and height from the IHDR chunk (bytes 16-23, big-endian).
