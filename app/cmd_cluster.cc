@@ -80,6 +80,29 @@ std::string EnsureLocalKeys(const ClusterConfig& c, const std::string& dir) {
   return abs;
 }
 
+// Two listeners on one port of one host fail at bind time; say which flags clash, before any
+// socket is opened. Port 0 (any free port) never clashes.
+void CheckDistinctEndpoints(const std::vector<std::pair<std::string, std::string>>& named) {
+  auto port_of = [](const std::string& e) -> int {
+    if (e.rfind("tcp://", 0) != 0) return 0;
+    const size_t colon = e.rfind(':');
+    try {
+      return colon == std::string::npos ? 0 : std::stoi(e.substr(colon + 1));
+    } catch (...) {
+      return 0;
+    }
+  };
+  for (size_t i = 0; i < named.size(); ++i) {
+    for (size_t k = i + 1; k < named.size(); ++k) {
+      const int a = port_of(named[i].second), b = port_of(named[k].second);
+      if (a != 0 && a == b) {
+        throw ConfigError(named[i].first + " and " + named[k].first + ": both use port " +
+                          std::to_string(a));
+      }
+    }
+  }
+}
+
 // ---- perch keygen ----
 struct KeygenFlags {
   std::string out;
@@ -152,6 +175,17 @@ int RunLearner(const LearnerFlags& f) {
                       std::to_string(setup.cluster.learners - 1) + " (cluster.learners " +
                       std::to_string(setup.cluster.learners) + ")");
   }
+  // What is known to fail at run time, found now: messages too small for the weights or a
+  // segment, an init_from that is missing or not a compatible policy, clashing ports.
+  CheckMessageSizes(setup);
+  {
+    PpoLearner probe(setup.policy, setup.ppo, setup.seed);
+    ApplyInitFrom(setup, &probe);
+  }
+  CheckDistinctEndpoints(
+      {{"--rollout-bind", f.rollout_bind},
+       {"--weights-bind", f.weights_bind},
+       {"--metrics-port", "tcp://" + f.metrics_bind + ":" + std::to_string(f.metrics_port)}});
   if (f.check_config) {
     std::cerr << "perch learner: config " << f.config << " and flags OK\n";
     return 0;
@@ -211,7 +245,7 @@ int RunActor(const ActorFlags& f) {
   CheckEndpoint(o.rollout_connect, "--rollout-connect");
   CheckEndpoint(o.weights_connect, "--weights-connect");
   if (f.actor_id < -1 || f.actor_id > 0x7fffffff) throw ConfigError("--actor-id: out of range");
-  if (f.envs < 0) throw ConfigError("--envs: must be >= 1");
+  if (f.envs < 0 || f.envs > 1024) throw ConfigError("--envs: must be in 1..1024");
   if (f.max_segments < 0) throw ConfigError("--max-segments: must be >= 0");
   const ExperimentConfig cfg = LoadExperimentConfig(f.config, f.sets);
   const ActorSetup setup = MakeActorSetup(cfg);
@@ -286,10 +320,22 @@ std::vector<std::string> ActorArgv(const TrainFlags& f, int id) {
 
 int RunTrain(TrainFlags f) {
   if (f.actors < 1) throw ConfigError("--actors: must be >= 1");
+  if (f.envs < 0 || f.envs > 1024) throw ConfigError("--envs: must be in 1..1024");
+  if (f.max_updates < 0) throw ConfigError("--max-updates: must be >= 0");
   CheckPort(f.rollout_port, "--rollout-port");
   CheckPort(f.weights_port, "--weights-port");
   CheckPort(f.metrics_port, "--metrics-port");
   const ExperimentConfig cfg = LoadExperimentConfig(f.config, f.overrides.All());
+  CheckDistinctEndpoints({{"--rollout-port", "tcp://h:" + std::to_string(f.rollout_port)},
+                          {"--weights-port", "tcp://h:" + std::to_string(f.weights_port)},
+                          {"--metrics-port", "tcp://h:" + std::to_string(f.metrics_port)}});
+  {
+    // The learner would refuse these only after the actors started.
+    const LearnerSetup setup = MakeLearnerSetup(cfg);
+    CheckMessageSizes(setup);
+    PpoLearner probe(setup.policy, setup.ppo, setup.seed);
+    ApplyInitFrom(setup, &probe);
+  }
   if (f.run_dir.empty()) {
     std::string base = f.config.substr(f.config.rfind('/') + 1);
     base = base.substr(0, base.rfind('.'));

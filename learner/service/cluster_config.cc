@@ -120,6 +120,12 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   c.task = TaskName(TaskFromName(c.task, ctx + ".task"));  // one spelling from here on
   CheckMin(ctx, "segment_steps", c.segment_steps, 1);
   CheckMin(ctx, "envs_per_actor", c.envs_per_actor, 1);
+  // Each env is a Bullet world (~1 MB) stepped in turn on one core: thousands are a mistake (1e9
+  // made the actor crash at 1.5 GB).
+  if (c.envs_per_actor > 1024) {
+    throw ConfigError(ctx + ".envs_per_actor: " + std::to_string(c.envs_per_actor) +
+                      " is more than 1024 (one actor steps its envs on one core; add actors)");
+  }
   CheckMin(ctx, "max_policy_lag", c.max_policy_lag, 0);
   CheckMin(ctx, "checkpoint_every", c.checkpoint_every, 1);
   CheckMin(ctx, "keep_last", c.keep_last, 1);

@@ -282,9 +282,32 @@ void LearnerService::Resume() {
                counters_.updates(), counters_.samples());
 }
 
-void LearnerService::InitFrom() {
-  if (setup_.cluster.init_from.empty()) return;
-  const std::string path = ResolveProjectPath(setup_.cluster.init_from);
+void CheckMessageSizes(const LearnerSetup& setup) {
+  // The weights message every actor must accept (its SUB drops bigger ones unread) and the
+  // biggest segment the learner must accept (its PULL drops the sender's connection).
+  PpoLearner ppo(setup.policy, setup.ppo, setup.seed);
+  proto::LearnerMessage m;
+  m.set_wire_version(proto::WIRE_VERSION_CURRENT);
+  ppo.ExportWeights(m.mutable_weights()->add_policies()->mutable_model());
+  const size_t weights = m.ByteSizeLong() + 256;  // + version, credit, run id
+  const size_t per_step = 4 * (2 * static_cast<size_t>(setup.policy.obs_dim) +
+                               static_cast<size_t>(setup.policy.action_size()) + 8);
+  const size_t segment = per_step * setup.cluster.segment_steps + 4096;
+  const size_t limit = static_cast<size_t>(setup.cluster.max_message_bytes);
+  if (weights > limit || segment > limit) {
+    throw ConfigError("cluster.max_message_bytes: " + std::to_string(limit) +
+                      " bytes is too small: the weights message needs about " +
+                      std::to_string(weights) + " and a segment of " +
+                      std::to_string(setup.cluster.segment_steps) + " steps about " +
+                      std::to_string(segment) + " (nothing would ever train)");
+  }
+}
+
+void LearnerService::InitFrom() { ApplyInitFrom(setup_, ppo_.get()); }
+
+void ApplyInitFrom(const LearnerSetup& setup, PpoLearner* ppo) {
+  if (setup.cluster.init_from.empty()) return;
+  const std::string path = ResolveProjectPath(setup.cluster.init_from);
   const std::string ctx = "cluster.init_from " + path;
   proto::Checkpoint c;
   try {
@@ -298,7 +321,7 @@ void LearnerService::InitFrom() {
   // Weights and normalizer only; the new run counts its own updates from 0.
   proto::ModelWeights w = c.trainer().model();
   w.set_version(0);
-  const PolicyConfig& mine = ppo_->model().config();
+  const PolicyConfig& mine = ppo->model().config();
   // A policy that observes more (walk: proprioceptive + goal) starts one that observes its prefix
   // (turn: proprioceptive), the authors' walk -> turn initialisation (notes 8.2).
   if (w.shape().obs_dim() > mine.obs_dim) {
@@ -320,10 +343,10 @@ void LearnerService::InitFrom() {
   const std::vector<int> ph(sh.policy_hidden().begin(), sh.policy_hidden().end());
   const std::vector<int> vh(sh.value_hidden().begin(), sh.value_hidden().end());
   if (ph != mine.policy_net.hidden || vh != mine.value_net.hidden) {
-    w = WidenModelWeights(w, mine, setup_.seed, ctx);
+    w = WidenModelWeights(w, mine, setup.seed, ctx);
     spdlog::info("learner: {} widened to this run's hidden layers (same policy and value)", ctx);
   }
-  ppo_->ImportWeights(w, ctx);  // ConfigError on another network shape or observation size
+  ppo->ImportWeights(w, ctx);  // ConfigError on another network shape or observation size
   spdlog::info("learner: new run initialised from {} (update {}, {} samples of training)", path,
                c.counters().updates(), c.counters().samples());
 }

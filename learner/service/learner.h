@@ -179,6 +179,12 @@ class LearnerService {
   std::string group_error_;
 };
 
+// cluster.init_from onto a new run's learner (weights and normalizer; mapped to fewer inputs,
+// another sigma mode or wider layers as needed). ConfigError naming the file and the reason.
+void ApplyInitFrom(const LearnerSetup& setup, PpoLearner* ppo);
+// ConfigError when cluster.max_message_bytes cannot carry the weights or a whole segment.
+void CheckMessageSizes(const LearnerSetup& setup);
+
 // Cuts a torn last line (no newline) off a metrics.jsonl, so rows appended later stay parseable.
 void RepairMetricsFile(const std::string& path);
 

@@ -2,6 +2,7 @@
 // (with the ConfigMap's config.json in place of /etc/perch/config.json).
 #include <dirent.h>
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 
 #include <algorithm>
@@ -164,6 +165,34 @@ TEST(K8sCheckConfigTest, CheckConfigRejectsBadFlags) {
   EXPECT_EQ(rc({"learner", "--config", dir + "/missing.json", "--run-dir", dir + "/r"}), 2);
   // --check-config creates nothing.
   EXPECT_NE(::access((dir + "/r").c_str(), F_OK), 0);
+}
+
+// What used to pass --check-config and then fail at run time (issue 17) is refused by name.
+TEST(K8sCheckConfigTest, CheckConfigCatchesRunTimeFailures) {
+  if (PerchBin().empty()) GTEST_SKIP() << "PERCH_BIN not set";
+  const std::string dir = TempDir("k8s-runtime");
+  int n = 0;
+  auto refused = [&](const Json& cluster, std::vector<std::string> extra, const std::string& why) {
+    const std::string sub = dir + "/" + std::to_string(n++);
+    ::mkdir(sub.c_str(), 0755);
+    const std::string cfg = WriteConfig(sub, MockConfig(cluster));
+    std::vector<std::string> argv = {PerchBin(),  "learner",  "--config",      cfg,
+                                     "--run-dir", sub + "/r", "--check-config"};
+    argv.insert(argv.end(), extra.begin(), extra.end());
+    int status = 0;
+    const pid_t pid = Spawn(argv, sub + "/log");
+    EXPECT_TRUE(WaitFor(pid, 30.0, &status));
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2)
+        << why << ": " << ReadFile(sub + "/log");
+    EXPECT_NE(ReadFile(sub + "/log").find(why), std::string::npos) << ReadFile(sub + "/log");
+  };
+  refused({{"init_from", dir + "/no_such_checkpoint.bin"}}, {}, "cluster.init_from");
+  std::ofstream(dir + "/not_a_checkpoint.bin") << "hello";
+  refused({{"init_from", dir + "/not_a_checkpoint.bin"}}, {}, "cluster.init_from");
+  refused({{"max_message_bytes", 2048}}, {}, "cluster.max_message_bytes");
+  refused({{"envs_per_actor", 1000000000}}, {}, "envs_per_actor");
+  refused({}, {"--rollout-bind", "tcp://127.0.0.1:7000", "--weights-bind", "tcp://127.0.0.1:7000"},
+          "both use port 7000");
 }
 
 }  // namespace
