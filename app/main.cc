@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
   perch::RegisterProfileCommands(app, *bench);
   perch::RegisterViewCommands(app, *bench);
   perch::RegisterInfoCommands(app, *bench);
+  perch::RegisterFuzzCommand(app);
   try {
     const std::string data_dir = perch::TakeDataDirFlag(&argc, argv);
     if (!data_dir.empty()) {

@@ -6,6 +6,7 @@ PACKAGES=(
   build-essential cmake pkg-config git
   libbullet-dev
   libzmq3-dev cppzmq-dev
+  prometheus-cpp-dev
   libprotobuf-dev protobuf-compiler
   libeigen3-dev
   libspdlog-dev libfmt-dev

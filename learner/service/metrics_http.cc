@@ -1,12 +1,16 @@
 #include "learner/service/metrics_http.h"
 
 #include <arpa/inet.h>
-#include <fcntl.h>
 #include <netinet/in.h>
 #include <poll.h>
+#include <prometheus/collectable.h>
+#include <prometheus/exposer.h>
+#include <prometheus/metric_family.h>
+#include <prometheus/text_serializer.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <cctype>
 #include <cerrno>
 #include <cstring>
 #include <sstream>
@@ -14,43 +18,46 @@
 
 namespace perch {
 
+// What the exposer collects at each scrape: a snapshot of the values Set() last gave.
+class MetricsServer::Collector : public prometheus::Collectable {
+ public:
+  explicit Collector(const MetricsServer* owner) : owner_(owner) {}
+  std::vector<prometheus::MetricFamily> Collect() const override { return owner_->Families(); }
+
+ private:
+  const MetricsServer* owner_;
+};
+
 MetricsServer::MetricsServer(int port, const std::string& address) {
-  listen_fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  if (listen_fd_ < 0) throw std::runtime_error("metrics: socket() failed");
-  const int one = 1;
-  ::setsockopt(listen_fd_, SOL_SOCKET, SO_REUSEADDR, &one, sizeof(one));
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  if (::inet_pton(AF_INET, address.c_str(), &addr.sin_addr) != 1) {
-    ::close(listen_fd_);
+  in_addr parsed{};
+  if (::inet_pton(AF_INET, address.c_str(), &parsed) != 1) {
     throw std::runtime_error("--metrics-bind " + address + ": not an IPv4 address");
   }
-  addr.sin_port = htons(static_cast<uint16_t>(port));
-  if (::bind(listen_fd_, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0 ||
-      ::listen(listen_fd_, 16) != 0) {
-    const std::string err = std::strerror(errno);
-    ::close(listen_fd_);
-    throw std::runtime_error("--metrics-port " + std::to_string(port) + ": cannot listen: " + err);
+  if (port < 0 || port > 65535) {
+    throw std::runtime_error("--metrics-port " + std::to_string(port) + ": not a port");
   }
-  socklen_t len = sizeof(addr);
-  ::getsockname(listen_fd_, reinterpret_cast<sockaddr*>(&addr), &len);
-  port_ = ntohs(addr.sin_port);
-  if (::pipe2(wake_pipe_, O_CLOEXEC) != 0) {
-    ::close(listen_fd_);
-    throw std::runtime_error("metrics: pipe() failed");
+  try {
+    // civetweb worker threads: one slow or stuck client holds one of them, not the endpoint.
+    exposer_ =
+        std::make_unique<prometheus::Exposer>(address + ":" + std::to_string(port), kHttpThreads);
+  } catch (const std::exception& e) {
+    throw std::runtime_error("--metrics-port " + std::to_string(port) + ": cannot listen on " +
+                             address + " (" + e.what() + ")");
   }
-  thread_ = std::thread([this] { Serve(); });
+  const std::vector<int> ports = exposer_->GetListeningPorts();
+  if (ports.empty()) {
+    throw std::runtime_error("--metrics-port " + std::to_string(port) + ": cannot listen on " +
+                             address);
+  }
+  port_ = ports.front();
+  collector_ = std::make_shared<Collector>(this);
+  exposer_->RegisterCollectable(collector_, "/metrics");
 }
 
 MetricsServer::~MetricsServer() {
-  const char c = 'x';
-  if (::write(wake_pipe_[1], &c, 1) < 0) {
-    // The thread also stops on its own at process exit; nothing else to do.
-  }
-  if (thread_.joinable()) thread_.join();
-  ::close(listen_fd_);
-  ::close(wake_pipe_[0]);
-  ::close(wake_pipe_[1]);
+  // Stop serving before the values go away.
+  if (exposer_) exposer_->RemoveCollectable(collector_, "/metrics");
+  exposer_.reset();
 }
 
 void MetricsServer::Set(const std::string& name, double value, const std::string& help,
@@ -62,54 +69,30 @@ void MetricsServer::Set(const std::string& name, double value, const std::string
   m.type = type;
 }
 
-std::string MetricsServer::Render() const {
+std::vector<prometheus::MetricFamily> MetricsServer::Families() const {
   std::lock_guard<std::mutex> lock(mu_);
-  std::ostringstream os;
-  os.precision(17);
+  std::vector<prometheus::MetricFamily> out;
+  out.reserve(metrics_.size());
   for (const auto& [name, m] : metrics_) {
-    os << "# HELP " << name << " " << m.help << "\n# TYPE " << name << " " << m.type << "\n"
-       << name << " " << m.value << "\n";
+    prometheus::MetricFamily f;
+    f.name = name;
+    f.help = m.help;
+    prometheus::ClientMetric c;
+    if (m.type == "counter") {
+      f.type = prometheus::MetricType::Counter;
+      c.counter.value = m.value;
+    } else {
+      f.type = prometheus::MetricType::Gauge;
+      c.gauge.value = m.value;
+    }
+    f.metric.push_back(c);
+    out.push_back(std::move(f));
   }
-  return os.str();
+  return out;
 }
 
-void MetricsServer::Serve() {
-  for (;;) {
-    pollfd fds[2] = {{listen_fd_, POLLIN, 0}, {wake_pipe_[0], POLLIN, 0}};
-    if (::poll(fds, 2, -1) < 0) {
-      if (errno == EINTR) continue;
-      return;
-    }
-    if (fds[1].revents) return;
-    if (!(fds[0].revents & POLLIN)) continue;
-    const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
-    if (fd < 0) continue;
-    // Read the request head (bounded in size and time); its content does not matter.
-    char buf[4096];
-    std::string req;
-    pollfd pfd{fd, POLLIN, 0};
-    while (req.find("\r\n\r\n") == std::string::npos && req.size() < 16384 &&
-           ::poll(&pfd, 1, 1000) > 0) {
-      const ssize_t n = ::read(fd, buf, sizeof(buf));
-      if (n <= 0) break;
-      req.append(buf, static_cast<size_t>(n));
-    }
-    const bool is_metrics = req.rfind("GET /metrics", 0) == 0;
-    const std::string body = is_metrics ? Render() : "see /metrics\n";
-    std::ostringstream os;
-    os << (is_metrics ? "HTTP/1.0 200 OK\r\n" : "HTTP/1.0 404 Not Found\r\n")
-       << "Content-Type: text/plain; version=0.0.4\r\nContent-Length: " << body.size()
-       << "\r\nConnection: close\r\n\r\n"
-       << body;
-    const std::string resp = os.str();
-    size_t off = 0;
-    while (off < resp.size()) {
-      const ssize_t n = ::send(fd, resp.data() + off, resp.size() - off, MSG_NOSIGNAL);
-      if (n <= 0) break;
-      off += static_cast<size_t>(n);
-    }
-    ::close(fd);
-  }
+std::string MetricsServer::Render() const {
+  return prometheus::TextSerializer().Serialize(Families());
 }
 
 std::string HttpGetLocal(int port, const std::string& path, int timeout_ms) {
@@ -123,7 +106,8 @@ std::string HttpGetLocal(int port, const std::string& path, int timeout_ms) {
     ::close(fd);
     throw std::runtime_error("http: cannot connect to 127.0.0.1:" + std::to_string(port));
   }
-  const std::string req = "GET " + path + " HTTP/1.0\r\nHost: localhost\r\n\r\n";
+  const std::string req =
+      "GET " + path + " HTTP/1.0\r\nHost: localhost\r\nConnection: close\r\n\r\n";
   if (::send(fd, req.data(), req.size(), MSG_NOSIGNAL) != static_cast<ssize_t>(req.size())) {
     ::close(fd);
     throw std::runtime_error("http: send failed");
@@ -131,14 +115,25 @@ std::string HttpGetLocal(int port, const std::string& path, int timeout_ms) {
   std::string resp;
   char buf[4096];
   pollfd pfd{fd, POLLIN, 0};
+  // Until the server closes, or the Content-Length it announced has arrived.
+  size_t want = std::string::npos;
   while (::poll(&pfd, 1, timeout_ms) > 0) {
     const ssize_t n = ::read(fd, buf, sizeof(buf));
     if (n <= 0) break;
     resp.append(buf, static_cast<size_t>(n));
+    const size_t head = resp.find("\r\n\r\n");
+    if (want == std::string::npos && head != std::string::npos) {
+      std::string lower = resp.substr(0, head);
+      for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+      const size_t cl = lower.find("content-length:");
+      if (cl != std::string::npos) want = head + 4 + std::stoul(lower.substr(cl + 15));
+    }
+    if (want != std::string::npos && resp.size() >= want) break;
   }
   ::close(fd);
   const size_t head = resp.find("\r\n\r\n");
-  if (resp.rfind("HTTP/1.0 200", 0) != 0 || head == std::string::npos) {
+  const bool ok = resp.rfind("HTTP/1.0 200", 0) == 0 || resp.rfind("HTTP/1.1 200", 0) == 0;
+  if (!ok || head == std::string::npos) {
     throw std::runtime_error("http: bad response from port " + std::to_string(port));
   }
   return resp.substr(head + 4);

@@ -1,13 +1,20 @@
-// A minimal Prometheus /metrics responder on a plain TCP socket (prometheus-cpp is not a Debian 12
-// package). It answers every HTTP request on the port with the current text exposition (format
-// 0.0.4) and closes the connection; one request at a time, on its own thread.
+// The learner's Prometheus /metrics endpoint, served by prometheus-cpp's pull exposer (civetweb):
+// concurrent scrapes on several threads, so a slow client cannot block the others (issue 17).
+// Values are set by name; each scrape reads a snapshot (text exposition format 0.0.4).
 #pragma once
 
 #include <atomic>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
+#include <vector>
+
+namespace prometheus {
+class Exposer;
+struct MetricFamily;
+}  // namespace prometheus
 
 namespace perch {
 
@@ -29,7 +36,9 @@ class MetricsServer {
   std::string Render() const;
 
  private:
-  void Serve();
+  class Collector;
+  static constexpr int kHttpThreads = 4;
+  std::vector<prometheus::MetricFamily> Families() const;
   struct Metric {
     double value = 0;
     std::string help;
@@ -37,10 +46,9 @@ class MetricsServer {
   };
   mutable std::mutex mu_;
   std::map<std::string, Metric> metrics_;
-  int listen_fd_ = -1;
-  int wake_pipe_[2] = {-1, -1};
   int port_ = 0;
-  std::thread thread_;
+  std::unique_ptr<prometheus::Exposer> exposer_;
+  std::shared_ptr<Collector> collector_;
 };
 
 // Fetches http://127.0.0.1:port/path with a plain socket (tests and `perch bench cluster`).

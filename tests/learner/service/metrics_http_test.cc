@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <string>
+#include <vector>
 
 namespace perch {
 namespace {
@@ -64,6 +65,29 @@ TEST(MetricsHttpTest, ListensOnLoopbackUnlessToldOtherwise) {
   EXPECT_FALSE(Connects(other, local.port())) << other;
   MetricsServer everywhere(0, "0.0.0.0");
   EXPECT_TRUE(Connects(other, everywhere.port())) << other;
+}
+
+// Slow or stuck clients (a byte every few seconds, or none) hold a worker each, not the endpoint:
+// other scrapes are still answered at once (issue 17: one client blocked it for everyone).
+TEST(MetricsHttpTest, SlowClientsDoNotBlockOtherScrapes) {
+  MetricsServer server(0);
+  server.Set("perch_updates_total", 7, "PPO updates", "counter");
+  std::vector<int> slow;
+  for (int i = 0; i < 2; ++i) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_port = htons(static_cast<uint16_t>(server.port()));
+    ::inet_pton(AF_INET, "127.0.0.1", &addr.sin_addr);
+    ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)), 0);
+    ASSERT_EQ(::send(fd, "GET /met", 8, MSG_NOSIGNAL), 8);  // and nothing more
+    slow.push_back(fd);
+  }
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NE(HttpGetLocal(server.port(), "/metrics", 1000).find("perch_updates_total 7"),
+              std::string::npos);
+  }
+  for (int fd : slow) ::close(fd);
 }
 
 TEST(MetricsHttpTest, SecondServerOnSamePortFails) {
