@@ -8,6 +8,7 @@
 
 #include "app/cli_check.h"
 #include "app/commands.h"
+#include "learner/service/wire.h"
 #include "common/json_util.h"
 #include "common/paths.h"
 
@@ -32,6 +33,7 @@ int main(int argc, char** argv) {
   perch::RegisterViewCommands(app, *bench);
   perch::RegisterInfoCommands(app, *bench);
   perch::RegisterFuzzCommand(app);
+  perch::RateLimitProtobufLogs();
   try {
     const std::string data_dir = perch::TakeDataDirFlag(&argc, argv);
     if (!data_dir.empty()) {

@@ -1,6 +1,12 @@
 #include "learner/service/wire.h"
 
+#include <google/protobuf/stubs/logging.h>
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <mutex>
 #include <cmath>
 #include <utility>
 
@@ -202,5 +208,29 @@ WireReject ParseLearnerMessage(const void* data, size_t size, size_t max_bytes,
   }
   return WireReject::kOk;
 }
+
+namespace {
+
+void ProtobufLogHandler(google::protobuf::LogLevel level, const char* filename, int line,
+                        const std::string& message) {
+  static std::mutex mu;
+  static double last_s = -1e9;
+  static uint64_t suppressed = 0;
+  const double now =
+      std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  std::lock_guard<std::mutex> lock(mu);
+  if (level < google::protobuf::LOGLEVEL_FATAL && now - last_s < 5.0) {
+    ++suppressed;
+    return;
+  }
+  last_s = now;
+  spdlog::warn("protobuf: {} ({}:{}){}", message, filename, line,
+               suppressed ? " (+" + std::to_string(suppressed) + " not logged)" : std::string());
+  suppressed = 0;
+}
+
+}  // namespace
+
+void RateLimitProtobufLogs() { google::protobuf::SetLogHandler(&ProtobufLogHandler); }
 
 }  // namespace perch

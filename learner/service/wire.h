@@ -36,4 +36,9 @@ WireReject ValidateSegment(const proto::Segment& s, const WireLimits& limits, st
 WireReject ParseLearnerMessage(const void* data, size_t size, size_t max_bytes,
                                proto::LearnerMessage* out, std::string* why);
 
+// Routes protobuf's own log lines (e.g. "invalid UTF-8" for every hostile Hello) through spdlog,
+// at most one line per 5 s with a count of the rest: a flood of bad messages cannot flood the log.
+// Call once at start (perch's main does).
+void RateLimitProtobufLogs();
+
 }  // namespace perch

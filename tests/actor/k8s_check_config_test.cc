@@ -193,6 +193,19 @@ TEST(K8sCheckConfigTest, CheckConfigCatchesRunTimeFailures) {
   refused({{"envs_per_actor", 1000000000}}, {}, "envs_per_actor");
   refused({}, {"--rollout-bind", "tcp://127.0.0.1:7000", "--weights-bind", "tcp://127.0.0.1:7000"},
           "both use port 7000");
+  // perch train refuses bad numbers before it starts anything.
+  const std::string cfg = WriteConfig(dir, MockConfig());
+  for (const std::vector<std::string>& bad : {std::vector<std::string>{"--max-updates", "-5"},
+                                              std::vector<std::string>{"--envs", "-1"}}) {
+    std::vector<std::string> argv = {PerchBin(), "train", "--config", cfg, "--run-dir", dir + "/t"};
+    argv.insert(argv.end(), bad.begin(), bad.end());
+    int status = 0;
+    const pid_t pid = Spawn(argv, dir + "/train.log");
+    EXPECT_TRUE(WaitFor(pid, 30.0, &status)) << bad[0];
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2)
+        << bad[0] << ReadFile(dir + "/train.log");
+    EXPECT_NE(ReadFile(dir + "/train.log").find(bad[0] + ":"), std::string::npos);
+  }
 }
 
 }  // namespace
