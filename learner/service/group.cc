@@ -59,6 +59,15 @@ ZmqGroup::ZmqGroup(zmq::context_t& ctx, const GroupOptions& options)
   // A bye must still leave when the process ends right after it.
   sock_.set(zmq::sockopt::linger, 1000);
   sock_.set(zmq::sockopt::sndtimeo, static_cast<int>(1e3 * std::min(options_.timeout_s, 3600.0)));
+  if (options_.keys != nullptr) {
+    if (options_.rank == 0) {
+      MakeCurveServer(sock_, *options_.keys);
+    } else {
+      sock_.set(zmq::sockopt::curve_serverkey, options_.keys->learner_public);
+      sock_.set(zmq::sockopt::curve_publickey, options_.keys->learner_public);
+      sock_.set(zmq::sockopt::curve_secretkey, options_.keys->learner_secret);
+    }
+  }
   if (options_.rank == 0) {
     sock_.set(zmq::sockopt::router_mandatory, 1);
     sock_.bind(options_.address);

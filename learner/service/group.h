@@ -18,6 +18,7 @@
 #include <zmq.hpp>
 
 #include "learner/collective.h"
+#include "learner/service/security.h"
 
 namespace perch {
 
@@ -29,6 +30,9 @@ struct GroupOptions {
   double join_timeout_s = 600;  // start-up: everybody must have joined by then
   std::string fingerprint;      // must be the same on every member
   const std::atomic<bool>* stop = nullptr;  // set: the waiting operation leaves the group
+  // CURVE (issue 17): rank 0 is the server with the learner's key pair, the others clients with
+  // the same pair; the context's ZAP handler must authorize learner_public. Null: no security.
+  const CurveKeys* keys = nullptr;
 };
 
 // What went over the group's socket, for metrics and `perch bench scale`.

@@ -176,9 +176,18 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
   // Only cluster members: CURVE with the authorized actor keys on sockets other processes reach.
   const bool curve = !setup.cluster.insecure &&
                      (NeedsCurve(options_.rollout_bind) || NeedsCurve(options_.weights_bind));
+  const bool group_curve = !setup.cluster.insecure && learners > 1 &&
+                           NeedsCurve(options_.group_address.empty() ? setup.cluster.group_address
+                                                                     : options_.group_address);
+  if (curve || group_curve) {
+    keys_ = std::make_unique<CurveKeys>(ReadLearnerKeys(KeysDir(setup.cluster)));
+    std::vector<std::string> authorized = keys_->authorized;
+    // The other learners of a group connect with the learner's own pair.
+    if (group_curve) authorized.push_back(keys_->learner_public);
+    zap_ = std::make_unique<ZapAuthenticator>(ctx, authorized);
+  }
   if (curve) {
-    const CurveKeys keys = ReadLearnerKeys(KeysDir(setup.cluster));
-    zap_ = std::make_unique<ZapAuthenticator>(ctx, keys.authorized);
+    const CurveKeys& keys = *keys_;
     MakeCurveServer(rollout_sock_, keys);
     MakeCurveServer(weights_sock_, keys);
   } else if (setup.cluster.insecure) {
@@ -201,6 +210,7 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
     g.join_timeout_s = setup.cluster.group_timeout_s;
     g.fingerprint = GroupFingerprint();
     g.stop = options_.stop;
+    g.keys = group_curve ? keys_.get() : nullptr;
     spdlog::info("learner: rank {} of {} joining the group at {} ({})", g.rank, g.size, g.address,
                  g.fingerprint);
     group_ = std::make_unique<ZmqGroup>(ctx, g);

@@ -172,6 +172,7 @@ class LearnerService {
   std::unique_ptr<RunProgress> progress_;  // created when Run() starts
   uint64_t nonfinite_updates_ = 0;         // updates discarded for non-finite results
   std::string stop_reason_;
+  std::unique_ptr<CurveKeys> keys_;        // CURVE: this learner's keys (null when insecure)
   std::unique_ptr<ZapAuthenticator> zap_;  // CURVE: answers the sockets' handshakes
   std::unique_ptr<ZmqGroup> group_;        // cluster.learners > 1
   RunningMeanStd pending_obs_delta_;  // group: received observation statistics, merged at update

@@ -3,6 +3,7 @@
 #include "learner/service/group.h"
 
 #include <gtest/gtest.h>
+#include <zmq.h>
 
 #include <atomic>
 #include <cmath>
@@ -14,9 +15,18 @@
 #include "common/proto/model.pb.h"
 #include "learner/policy.h"
 #include "learner/ppo.h"
+#include "learner/service/security.h"
 
 namespace perch {
 namespace {
+
+int PickFreePortForTest() {
+  zmq::context_t c;
+  zmq::socket_t s(c, zmq::socket_type::rep);
+  s.bind("tcp://127.0.0.1:*");
+  const std::string e = s.get(zmq::sockopt::last_endpoint);
+  return std::stoi(e.substr(e.rfind(':') + 1));
+}
 
 GroupOptions Member(int rank, int size, const std::string& address, const std::string& fp = "x") {
   GroupOptions o;
@@ -186,6 +196,61 @@ TEST(GroupTest, AMissingRankZeroIsNamedAfterTheTimeout) {
               std::string::npos)
         << e.what();
   }
+}
+
+// With keys (issue 17), members join over TCP; a process without the learner's key pair does not.
+TEST(GroupTest, OverTcpWithKeysOnlyHoldersOfTheLearnersKeyJoin) {
+  char tmpl[] = "/tmp/perch-group-keys-XXXXXX";
+  ASSERT_NE(::mkdtemp(tmpl), nullptr);
+  const std::string dir = std::string(tmpl) + "/keys";
+  WriteClusterKeys(dir);
+  const CurveKeys keys = ReadLearnerKeys(dir);
+  zmq::context_t ctx;
+  ZapAuthenticator zap(ctx, {keys.learner_public});
+  const std::string address = "tcp://127.0.0.1:" + std::to_string(PickFreePortForTest());
+  std::vector<float> got(2);
+  std::thread root([&] {
+    GroupOptions o = Member(0, 2, address);
+    o.keys = &keys;
+    ZmqGroup g(ctx, o);
+    float x = 1.0f;
+    g.AllReduceSum(&x, 1);
+    got[0] = x;
+  });
+  // A stranger first: no keys at all, then a key pair of its own.
+  {
+    zmq::context_t other;
+    GroupOptions o = Member(1, 2, address);
+    o.join_timeout_s = 0.5;
+    EXPECT_THROW(ZmqGroup g(other, o), GroupError);
+    CurveKeys stranger = keys;
+    char pub[41], sec[41];
+    ASSERT_EQ(zmq_curve_keypair(pub, sec), 0);
+    stranger.learner_public = pub;  // its own pair, the learner's public key as the server key
+    stranger.learner_secret = sec;
+    zmq::socket_t s(other, zmq::socket_type::dealer);
+    s.set(zmq::sockopt::linger, 0);
+    s.set(zmq::sockopt::curve_serverkey, keys.learner_public);
+    s.set(zmq::sockopt::curve_publickey, std::string(pub));
+    s.set(zmq::sockopt::curve_secretkey, std::string(sec));
+    s.connect(address);
+    (void)s.send(zmq::buffer(std::string("H")), zmq::send_flags::dontwait);
+    for (int i = 0; i < 100 && zap.refused() == 0; ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    EXPECT_GT(zap.refused(), 0u);
+  }
+  GroupOptions o = Member(1, 2, address);
+  o.keys = &keys;
+  {
+    ZmqGroup g(ctx, o);
+    float x = 2.0f;
+    g.AllReduceSum(&x, 1);
+    got[1] = x;
+  }
+  root.join();
+  EXPECT_EQ(got[0], 3.0f);
+  EXPECT_EQ(got[1], 3.0f);
 }
 
 // --- PPO over a group ----------------------------------------------------------------------
