@@ -385,6 +385,23 @@ int RunTrain(TrainFlags f) {
     return e ? uintmax_t{0} : n;
   };
   uintmax_t last_size = metrics_size();
+  // Restart counts for the learner's /metrics (perch_*_restarts_total) and for operators.
+  auto write_restarts = [&] {
+    int actor_restarts = 0, given_up = 0;
+    for (int i = 0; i < f.actors; ++i) {
+      actor_restarts += actor_policy[i].restarts();
+      given_up += gave_up[i];
+    }
+    try {
+      SaveJsonFileAtomic(f.run_dir + "/launcher.json",
+                         Json{{"learner_restarts", learner_policy.restarts()},
+                              {"actor_restarts", actor_restarts},
+                              {"actors_given_up", given_up}});
+    } catch (const std::exception& e) {
+      spdlog::warn("train: cannot write {}/launcher.json: {}", f.run_dir, e.what());
+    }
+  };
+  write_restarts();
   double last_progress = MonotonicSeconds(), last_watch = 0.0, last_stall_warning = -1e9;
   bool stopped_warned = false;
   while (!g_stop.load()) {
@@ -436,12 +453,14 @@ int RunTrain(TrainFlags f) {
       learner = Spawn(LearnerArgv(f, true), "");
       learner_policy.OnStart(now);
       learner_restart_at = -1.0;
+      write_restarts();
     }
     int alive_or_due = 0;
     for (int i = 0; i < f.actors; ++i) {
       if (actors[i] < 0 && !gave_up[i] && now >= restart_at[i]) {
         actors[i] = Spawn(ActorArgv(f, i), logs + "/actor-" + std::to_string(i) + ".log");
         actor_policy[i].OnStart(now);
+        write_restarts();
       }
       alive_or_due += !gave_up[i];
     }

@@ -722,6 +722,21 @@ void LearnerService::UpdateGauges() {
   if (!metrics_) return;
   MetricsServer& m = *metrics_;
   m.Set("perch_updates_total", counters_.updates(), "PPO updates", "counter");
+  // Written by `perch train` (its restarts of this learner and of the actors); absent otherwise.
+  try {
+    const std::string launcher = options_.run_dir + "/launcher.json";
+    if (std::filesystem::exists(launcher)) {
+      const Json j = LoadJsonFile(launcher);
+      m.Set("perch_learner_restarts_total", j.value("learner_restarts", 0.0),
+            "learner restarts by perch train", "counter");
+      m.Set("perch_actor_restarts_total", j.value("actor_restarts", 0.0),
+            "actor restarts by perch train", "counter");
+      m.Set("perch_actors_given_up", j.value("actors_given_up", 0.0),
+            "actors perch train stopped restarting (identical failures)");
+    }
+  } catch (const std::exception&) {
+    // A file being replaced right now: next second.
+  }
   m.Set("perch_samples_total", counters_.samples(), "env steps trained on", "counter");
   m.Set("perch_episodes_total", counters_.episodes(), "episodes finished", "counter");
   m.Set("perch_segments_total", counters_.segments(), "segments accepted", "counter");
@@ -729,6 +744,10 @@ void LearnerService::UpdateGauges() {
         "counter");
   m.Set("perch_rejected_total", counters_.rejected(), "messages that failed to parse/validate",
         "counter");
+  for (const auto& [reason, n] : stats_.rejected_by_kind) {
+    m.SetLabelled("perch_rejected_by_reason_total", "reason", reason, static_cast<double>(n),
+                  "rejected messages (ppo: segments of a batch PPO refused), by reason", "counter");
+  }
   m.Set("perch_samples_per_second", last_samples_per_s_, "samples/s over the last update");
   m.Set("perch_policy_lag", last_lag_mean_, "mean policy lag of the last batch, in versions");
   m.Set("perch_return_mean", last_return_mean_, "mean episode return of the last batch");

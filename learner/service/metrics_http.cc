@@ -10,11 +10,14 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cctype>
 #include <cerrno>
+#include <chrono>
 #include <cstring>
 #include <sstream>
 #include <stdexcept>
+#include <thread>
 
 namespace perch {
 
@@ -50,23 +53,50 @@ MetricsServer::MetricsServer(int port, const std::string& address) {
                              address);
   }
   port_ = ports.front();
+  address_ = address;
   collector_ = std::make_shared<Collector>(this);
   exposer_->RegisterCollectable(collector_, "/metrics");
 }
 
 MetricsServer::~MetricsServer() {
   // Stop serving before the values go away.
-  if (exposer_) exposer_->RemoveCollectable(collector_, "/metrics");
+  if (!exposer_) return;
+  exposer_->RemoveCollectable(collector_, "/metrics");
+  // civetweb's listener looks at its stop flag only between 2-second polls; a connection made
+  // while it stops wakes it, so that a learner exits at once rather than up to 2 s later.
+  std::atomic<bool> done{false};
+  std::thread waker([this, &done] {
+    for (int i = 0; i < 40 && !done.load(); ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+      if (fd < 0) return;
+      sockaddr_in addr{};
+      addr.sin_family = AF_INET;
+      addr.sin_port = htons(static_cast<uint16_t>(port_));
+      ::inet_pton(AF_INET, address_ == "0.0.0.0" ? "127.0.0.1" : address_.c_str(), &addr.sin_addr);
+      ::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr));
+      ::close(fd);
+    }
+  });
   exposer_.reset();
+  done = true;
+  waker.join();
 }
 
 void MetricsServer::Set(const std::string& name, double value, const std::string& help,
                         const char* type) {
+  SetLabelled(name, "", "", value, help, type);
+}
+
+void MetricsServer::SetLabelled(const std::string& name, const std::string& label,
+                                const std::string& label_value, double value,
+                                const std::string& help, const char* type) {
   std::lock_guard<std::mutex> lock(mu_);
-  Metric& m = metrics_[name];
-  m.value = value;
-  m.help = help;
-  m.type = type;
+  Family& f = metrics_[name];
+  f.help = help;
+  f.type = type;
+  f.label = label;
+  f.values[label_value] = value;
 }
 
 std::vector<prometheus::MetricFamily> MetricsServer::Families() const {
@@ -77,15 +107,17 @@ std::vector<prometheus::MetricFamily> MetricsServer::Families() const {
     prometheus::MetricFamily f;
     f.name = name;
     f.help = m.help;
-    prometheus::ClientMetric c;
-    if (m.type == "counter") {
-      f.type = prometheus::MetricType::Counter;
-      c.counter.value = m.value;
-    } else {
-      f.type = prometheus::MetricType::Gauge;
-      c.gauge.value = m.value;
+    f.type = m.type == "counter" ? prometheus::MetricType::Counter : prometheus::MetricType::Gauge;
+    for (const auto& [label_value, value] : m.values) {
+      prometheus::ClientMetric c;
+      if (!m.label.empty()) c.label.push_back({m.label, label_value});
+      if (f.type == prometheus::MetricType::Counter) {
+        c.counter.value = value;
+      } else {
+        c.gauge.value = value;
+      }
+      f.metric.push_back(c);
     }
-    f.metric.push_back(c);
     out.push_back(std::move(f));
   }
   return out;

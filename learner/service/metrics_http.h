@@ -32,6 +32,10 @@ class MetricsServer {
   // Sets gauge/counter `name` (a Prometheus metric name, e.g. perch_updates_total).
   void Set(const std::string& name, double value, const std::string& help,
            const char* type = "gauge");
+  // One series of a labelled family, e.g. perch_rejected_by_reason_total{reason="parse"}.
+  void SetLabelled(const std::string& name, const std::string& label,
+                   const std::string& label_value, double value, const std::string& help,
+                   const char* type = "gauge");
   // The text served at /metrics.
   std::string Render() const;
 
@@ -39,14 +43,16 @@ class MetricsServer {
   class Collector;
   static constexpr int kHttpThreads = 4;
   std::vector<prometheus::MetricFamily> Families() const;
-  struct Metric {
-    double value = 0;
+  struct Family {
     std::string help;
     std::string type;
+    std::string label;                     // "" for an unlabelled metric
+    std::map<std::string, double> values;  // label value ("" unlabelled) -> value
   };
   mutable std::mutex mu_;
-  std::map<std::string, Metric> metrics_;
+  std::map<std::string, Family> metrics_;
   int port_ = 0;
+  std::string address_;
   std::unique_ptr<prometheus::Exposer> exposer_;
   std::shared_ptr<Collector> collector_;
 };

@@ -315,6 +315,16 @@ TEST_F(ClusterProcessTest, GarbageTruncatedAndStaleMessagesAreCountedAndIgnored)
   ASSERT_TRUE(WaitUntil(
       [&] { return Scrape(l.metrics_port, "perch_segments_total") >= segments0 + 1; }, 10.0));
   EXPECT_EQ(Scrape(l.metrics_port, "perch_rejected_total"), rejected0 + 4);
+  // Each reason is its own labelled series, and they add up to the total.
+  EXPECT_GE(Scrape(l.metrics_port, "perch_rejected_by_reason_total{reason=\"parse\"}"), 3.0);
+  double by_reason = 0;
+  for (const char* r :
+       {"too_big", "parse", "version", "empty", "shape", "non_finite", "out_of_range", "ppo"}) {
+    by_reason += std::max(0.0, Scrape(l.metrics_port, std::string("perch_rejected_by_reason_total"
+                                                                  "{reason=\"") +
+                                                          r + "\"}"));
+  }
+  EXPECT_EQ(by_reason, Scrape(l.metrics_port, "perch_rejected_total"));
   EXPECT_EQ(Scrape(l.metrics_port, "perch_dropped_stale_total"), stale0 + 2);
   EXPECT_EQ(Scrape(l.metrics_port, "perch_segments_total"), segments0 + 1);
   EXPECT_TRUE(Alive(l.pid));

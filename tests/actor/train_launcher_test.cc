@@ -75,9 +75,12 @@ TEST(TrainLauncherTest, RestartsDeadActorAndStopsCleanlyOnSigterm) {
   // Checkpoints rarely: the one at the end must come from the SIGTERM shutdown.
   const std::string cfg = WriteConfig(dir, MockConfig({{"checkpoint_every", 1000}}));
   const std::string run = dir + "/run";
-  const pid_t train = Spawn(TrainArgv(cfg, run), dir + "/train.log");
+  const std::vector<std::string> argv = TrainArgv(cfg, run);
+  const int metrics_port = std::stoi(argv.back());
+  const pid_t train = Spawn(argv, dir + "/train.log");
   ASSERT_TRUE(WaitUntil([&] { return ReadMetrics(run).size() >= 2; }, 30.0))
       << ReadFile(dir + "/train.log");
+  EXPECT_EQ(Scrape(metrics_port, "perch_actor_restarts_total"), 0.0);
   std::set<pid_t> actors = ActorChildren(train);
   ASSERT_EQ(actors.size(), 2u);
   const pid_t victim = *actors.begin();
@@ -91,6 +94,9 @@ TEST(TrainLauncherTest, RestartsDeadActorAndStopsCleanlyOnSigterm) {
       << ReadFile(dir + "/train.log");
   EXPECT_NE(ReadFile(dir + "/train.log").find("killed by signal 9; restarting it"),
             std::string::npos);
+  // The restart is counted on the learner's /metrics (from the launcher's launcher.json).
+  EXPECT_TRUE(
+      WaitUntil([&] { return Scrape(metrics_port, "perch_actor_restarts_total") == 1.0; }, 10.0));
   const size_t n = ReadMetrics(run).size();
   ASSERT_TRUE(WaitUntil([&] { return ReadMetrics(run).size() >= n + 2; }, 30.0));
   const std::vector<pid_t> children = Children(train);

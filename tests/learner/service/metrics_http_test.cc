@@ -28,6 +28,16 @@ TEST(MetricsHttpTest, ServesTextExposition) {
   EXPECT_NE(HttpGetLocal(server.port(), "/metrics").find("perch_updates_total 13\n"),
             std::string::npos);
   EXPECT_THROW(HttpGetLocal(server.port(), "/other"), std::runtime_error);  // 404
+  // Labelled series of one family.
+  server.SetLabelled("perch_rejected_by_reason_total", "reason", "parse", 3, "rejected", "counter");
+  server.SetLabelled("perch_rejected_by_reason_total", "reason", "out_of_range", 5, "rejected",
+                     "counter");
+  const std::string labelled = HttpGetLocal(server.port(), "/metrics");
+  EXPECT_NE(labelled.find("perch_rejected_by_reason_total{reason=\"parse\"} 3\n"),
+            std::string::npos)
+      << labelled;
+  EXPECT_NE(labelled.find("perch_rejected_by_reason_total{reason=\"out_of_range\"} 5\n"),
+            std::string::npos);
 }
 
 // A non-loopback IPv4 address of this machine, or "" when it has none.
