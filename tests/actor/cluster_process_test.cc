@@ -6,8 +6,10 @@
 #include <sys/socket.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <memory>
 #include <string>
 #include <vector>
 #include <zmq.hpp>
@@ -373,6 +375,144 @@ TEST_F(ClusterProcessTest, LearnerAndTwoActorsTrainOnTheRealEnv) {
   int episodes = 0;
   for (const Json& r : rows) episodes += r["episodes"].get<int>();
   EXPECT_GT(episodes, 0);
+}
+
+}  // namespace
+}  // namespace perch
+
+namespace perch {
+namespace {
+
+using namespace testing_util;
+
+// Issue 17's attacks against one running cluster (a real learner process and a real actor on
+// loopback, keys off so that the attacks reach the learner at all): poisoned statistics, huge and
+// NaN values, a subscription flood, a heartbeat flood with made-up ids, stuck /metrics clients,
+// raw garbage on the ports. The run must keep training, publish finite weights, write finite
+// checkpoints, and resume from its newest one.
+class AttackTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (PerchBin().empty()) GTEST_SKIP() << "PERCH_BIN not set";
+    dir_ = TempDir("attack");
+    run_dir_ = dir_ + "/run";
+  }
+  size_t Updates() const { return ReadMetrics(run_dir_).size(); }
+  std::string dir_, run_dir_;
+};
+
+bool FiniteState(const proto::Checkpoint& c) {
+  auto finite = [](const auto& v) {
+    for (float x : v) {
+      if (!std::isfinite(x)) return false;
+    }
+    return true;
+  };
+  const proto::RunningStats& s = c.trainer().model().obs_stats();
+  for (double x : s.mean()) {
+    if (!std::isfinite(x)) return false;
+  }
+  return finite(c.trainer().model().params()) && std::isfinite(s.count()) && s.count() < 1e12;
+}
+
+TEST_F(AttackTest, TheRunKeepsTrainingWithFiniteWeightsAndResumesAfterEveryAttack) {
+  const std::string cfg = WriteConfig(dir_, MockConfig({{"max_policy_lag", 2}}));
+  LearnerProc l;
+  l.Start(cfg, run_dir_, false);
+  const pid_t actor = StartActor(cfg, l, 0, dir_ + "/a0.log");
+  ASSERT_TRUE(WaitUntil([&] { return Updates() >= 3; }, 30.0)) << ReadFile(l.log);
+  const double version = Scrape(l.metrics_port, "perch_weights_version");
+
+  zmq::context_t ctx(1);
+  zmq::socket_t push(ctx, zmq::socket_type::push);
+  push.set(zmq::sockopt::linger, 2000);
+  push.connect(l.Rollout());
+  auto send = [&](const proto::ActorMessage& m) {
+    push.send(zmq::buffer(m.SerializeAsString()), zmq::send_flags::none);
+  };
+  auto segment = [&] {
+    proto::ActorMessage m;
+    m.ParseFromString(SegmentBytes(static_cast<uint64_t>(version)));
+    return m;
+  };
+  // Poisoned statistics: a count of 1e308, a mean of 1e30.
+  proto::ActorMessage poison = segment();
+  proto::RunningStats* st = poison.mutable_segment()->mutable_rollout()->mutable_obs_stats_delta();
+  st->set_count(1e308);
+  st->clear_mean();
+  st->clear_var();
+  for (int i = 0; i < 6; ++i) {
+    st->add_mean(0.1);
+    st->add_var(1.0);
+  }
+  send(poison);
+  // Huge observations and rewards, NaN values.
+  proto::ActorMessage huge = segment();
+  for (int i = 0; i < 4; ++i) huge.mutable_segment()->mutable_rollout()->set_rewards(i, 1e30f);
+  send(huge);
+  proto::ActorMessage nan = segment();
+  nan.mutable_segment()->mutable_rollout()->set_values(0, std::nanf(""));
+  send(nan);
+  // Heartbeats with 20,000 made-up instance ids.
+  for (int i = 0; i < 20000; ++i) {
+    proto::ActorMessage hb;
+    hb.set_wire_version(proto::WIRE_VERSION_CURRENT);
+    hb.mutable_heartbeat()->set_actor_instance(0xabc0000000ULL + i);
+    send(hb);
+  }
+  // A subscription flood on the weights port.
+  std::vector<std::unique_ptr<zmq::socket_t>> subs;
+  for (int i = 0; i < 200; ++i) {
+    subs.push_back(std::make_unique<zmq::socket_t>(ctx, zmq::socket_type::sub));
+    subs.back()->set(zmq::sockopt::linger, 0);
+    subs.back()->set(zmq::sockopt::subscribe, "");
+    subs.back()->connect(l.Weights());
+  }
+  // Two stuck /metrics clients and raw garbage on every port.
+  std::vector<int> stuck;
+  for (int i = 0; i < 2; ++i) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    addr.sin_port = htons(static_cast<uint16_t>(l.metrics_port));
+    if (::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) == 0) {
+      (void)!::send(fd, "GET /me", 7, MSG_NOSIGNAL);
+    }
+    stuck.push_back(fd);
+  }
+  RawTcpSend(l.rollout_port, std::string(4096, '\x7f'));
+  RawTcpSend(l.weights_port, std::string(100, '\0'));
+
+  // Still training, still scraped, the poison refused.
+  const size_t after = Updates();
+  EXPECT_TRUE(WaitUntil([&] { return Updates() >= after + 4; }, 60.0)) << ReadFile(l.log);
+  const double refused =
+      std::max(0.0,
+               Scrape(l.metrics_port, "perch_rejected_by_reason_total{reason=\"out_of_range\"}")) +
+      std::max(0.0,
+               Scrape(l.metrics_port, "perch_rejected_by_reason_total{reason=\"non_finite\"}"));
+  EXPECT_GE(refused, 3.0) << "the poisoned, huge and NaN segments";
+  EXPECT_TRUE(Alive(l.pid));
+  for (int fd : stuck) ::close(fd);
+  subs.clear();
+  Stop(actor, 5.0);
+  Stop(l.pid, 10.0);
+  l.pid = -1;
+
+  // Every checkpoint finite; the newest resumes.
+  CheckpointStore store(run_dir_, 3, 0);
+  const std::vector<uint64_t> present = store.List();
+  ASSERT_FALSE(present.empty());
+  for (uint64_t u : present) {
+    EXPECT_TRUE(FiniteState(ReadCheckpointFile(store.PathFor(u)))) << "update " << u;
+  }
+  LearnerProc again;
+  again.Start(cfg, run_dir_, true);
+  EXPECT_TRUE(WaitUntil(
+      [&] { return ReadFile(again.log).find("resumed from") != std::string::npos; }, 20.0))
+      << ReadFile(again.log);
+  EXPECT_TRUE(Alive(again.pid));
 }
 
 }  // namespace
