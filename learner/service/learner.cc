@@ -187,6 +187,20 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
     zap_ = std::make_unique<ZapAuthenticator>(ctx, authorized);
   }
   if (curve) {
+    // Handshakes that fail before the ZAP handler is asked (a client without CURVE at all, a
+    // wrong server key) are seen only by a socket monitor: count them too.
+    for (zmq::socket_t* sock : {&rollout_sock_, &weights_sock_}) {
+      const std::string ep =
+          "inproc://perch-monitor-" + std::to_string(reinterpret_cast<uintptr_t>(sock));
+      if (zmq_socket_monitor(sock->handle(), ep.c_str(),
+                             ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL |
+                                 ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL |
+                                 ZMQ_EVENT_HANDSHAKE_FAILED_AUTH) == 0) {
+        monitors_.emplace_back(ctx, zmq::socket_type::pair);
+        monitors_.back().set(zmq::sockopt::linger, 0);
+        monitors_.back().connect(ep);
+      }
+    }
     const CurveKeys& keys = *keys_;
     MakeCurveServer(rollout_sock_, keys);
     MakeCurveServer(weights_sock_, keys);
@@ -440,6 +454,17 @@ void LearnerService::SeeActor(uint64_t instance, double now) {
   if (actor_last_seen_.size() >= kMaxTrackedActors) PruneActors(now);
   if (actor_last_seen_.size() >= kMaxTrackedActors) return;
   actor_last_seen_[instance] = now;
+}
+
+void LearnerService::DrainMonitors() {
+  for (zmq::socket_t& m : monitors_) {
+    zmq::message_t event;
+    while (m.recv(event, zmq::recv_flags::dontwait)) {
+      if (event.size() >= 2) ++handshake_failures_;
+      zmq::message_t endpoint;  // the second frame of every event
+      if (event.more()) (void)m.recv(endpoint, zmq::recv_flags::dontwait);
+    }
+  }
 }
 
 void LearnerService::PruneActors(double now) {
@@ -765,6 +790,8 @@ void LearnerService::UpdateGauges() {
         "fresh credit grants because the batch stopped filling", "counter");
   m.Set("perch_auth_refused_total", static_cast<double>(auth_refused()),
         "connections refused at the CURVE handshake (no authorized key)", "counter");
+  m.Set("perch_handshake_failures_total", static_cast<double>(handshake_failures_),
+        "failed handshakes on the rollout/weights sockets (no CURVE, wrong keys)", "counter");
   m.Set("perch_nonfinite_updates_total", static_cast<double>(nonfinite_updates_),
         "PPO updates discarded because they left a non-finite weight or statistic", "counter");
 }
@@ -853,6 +880,7 @@ void LearnerService::Run() {
       }
     }
     if (now - last_gauges >= 1.0) {
+      DrainMonitors();
       PruneActors(now);
       UpdateGauges();
       last_gauges = now;

@@ -97,6 +97,7 @@ class LearnerService {
   static constexpr size_t kMaxTrackedActors = 65536;
   // Actor instances tracked for liveness (bounded by kMaxTrackedActors).
   size_t tracked_actors() const { return actor_last_seen_.size(); }
+  uint64_t handshake_failures() const { return handshake_failures_; }
   uint64_t auth_refused() const { return zap_ ? zap_->refused() : 0; }
   const ZmqGroup* group() const { return group_.get(); }
   // The group fingerprint: config, update count and weights, equal on every member that may join.
@@ -117,7 +118,9 @@ class LearnerService {
   void UpdateGauges();
   int ActorsAlive() const;
   void SeeActor(uint64_t instance, double now);  // liveness, bounded (kMaxTrackedActors)
-  void PruneActors(double now);                  // forgets actors silent for actor_timeout_s
+  void PruneActors(double now);
+  void DrainMonitors();  // counts handshake failures reported by the socket monitors // forgets
+                         // actors silent for actor_timeout_s
   void Resume();
   void InitFrom();  // cluster.init_from, for a new run
 
@@ -175,6 +178,8 @@ class LearnerService {
   std::unique_ptr<CurveKeys> keys_;        // CURVE: this learner's keys (null when insecure)
   std::unique_ptr<ZapAuthenticator> zap_;  // CURVE: answers the sockets' handshakes
   std::unique_ptr<ZmqGroup> group_;        // cluster.learners > 1
+  std::vector<zmq::socket_t> monitors_;    // CURVE: handshake events of the two sockets
+  uint64_t handshake_failures_ = 0;
   RunningMeanStd pending_obs_delta_;  // group: received observation statistics, merged at update
   std::string group_end_;             // set when the group stopped or failed: the run ends
   std::string group_error_;

@@ -45,7 +45,8 @@ TEST(CurveTest, KeygenWritesTwoPairsAndNeverOverwritesThem) {
   }
   EXPECT_EQ(ReadFile(dir + "/learner.key"), before);
   // A damaged key and a bad authorized_keys line are named.
-  std::ofstream(dir + "/authorized_keys") << "# extra actors\n" << a.actor_public << "\nnot-a-key\n";
+  std::ofstream(dir + "/authorized_keys") << "# extra actors\n"
+                                          << a.actor_public << "\nnot-a-key\n";
   try {
     ReadLearnerKeys(dir);
     FAIL() << "a bad authorized key accepted";
@@ -118,6 +119,8 @@ TEST(CurveTest, OnlyTheAuthorizedActorTrainsOrReadsTheLearner) {
     (void)curve.send(zmq::buffer(std::string("not a segment")), zmq::send_flags::dontwait);
   }
   EXPECT_TRUE(WaitUntil([&] { return learner.auth_refused() > 0; }, 10.0));
+  // The client without CURVE fails the handshake before ZAP: counted by the socket monitor.
+  EXPECT_TRUE(WaitUntil([&] { return learner.handshake_failures() > 0; }, 10.0));
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   EXPECT_EQ(learner.stats().messages, 0u) << "a stranger's message reached the learner";
 
