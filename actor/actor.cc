@@ -1,10 +1,13 @@
 #include "actor/actor.h"
 
+#include <fcntl.h>
 #include <spdlog/spdlog.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <cmath>
+#include <fstream>
 #include <thread>
 
 #include "common/proto/model.pb.h"
@@ -70,6 +73,16 @@ ActorService::ActorService(zmq::context_t& ctx, const ActorSetup& setup,
 
 ActorService::~ActorService() = default;
 
+void ActorService::TouchAliveFile() {
+  if (options_.alive_file.empty()) return;
+  const double now = MonotonicSeconds();
+  if (now - last_alive_touch_s_ < 1.0) return;
+  last_alive_touch_s_ = now;
+  // Created if missing; an existing file gets a new mtime.
+  std::ofstream(options_.alive_file, std::ios::app).flush();
+  ::utimensat(AT_FDCWD, options_.alive_file.c_str(), nullptr, 0);
+}
+
 bool ActorService::Send(const std::string& bytes) {
   const double t0 = MonotonicSeconds();
   double last_log = t0;
@@ -86,6 +99,7 @@ bool ActorService::Send(const std::string& bytes) {
     } catch (const zmq::error_t& e) {
       if (e.num() != EINTR) throw;
     }
+    TouchAliveFile();  // waiting for the learner is not being stuck
     // An operator must see why nothing trains: say so every few seconds while it lasts.
     if (const double now = MonotonicSeconds(); now - last_log >= kUnreachableLogS) {
       last_log = now;
@@ -122,6 +136,7 @@ void ActorService::MaybeHeartbeat() {
   last_heartbeat_s_ = now;
   proto::ActorMessage m;
   m.set_wire_version(proto::WIRE_VERSION_CURRENT);
+  TouchAliveFile();
   proto::Heartbeat* h = m.mutable_heartbeat();
   h->set_actor_id(options_.actor_id);
   h->set_actor_instance(instance_);

@@ -44,6 +44,9 @@ struct ActorOptions {
   int num_envs = 4;
   int64_t max_segments = 0;  // per env; 0: until stopped (tests and benchmarks bound it)
   const std::atomic<bool>* stop = nullptr;
+  // Touched (mtime) at every heartbeat and while waiting for an unreachable learner: a k8s
+  // liveness probe checks that the actor's loop runs (k8s/actors.yaml). Empty: none.
+  std::string alive_file;
   // `perch bench scale`: a synthetic actor. No env is built; each segment is the next of these
   // recordings (restamped with this actor's weights version), sent at replay_samples_per_s.
   // Hello, heartbeats, credit and weights run exactly as for a real actor.
@@ -80,6 +83,7 @@ class ActorService {
   // Applies the newest weights waiting on the socket; blocks up to timeout_ms for one.
   bool PollWeights(int timeout_ms);
   bool Send(const std::string& bytes);  // false when stopped before it could be queued
+  void TouchAliveFile();                // options_.alive_file, at most once a second
   void SendHello();
   void MaybeHeartbeat();
   void TakeCredit(const proto::Weights& w);
@@ -116,6 +120,7 @@ class ActorService {
   Rng lag_rng_;
   ActorCounters counters_;
   double start_s_ = 0.0;
+  double last_alive_touch_s_ = -1e9;
   double last_heartbeat_s_ = 0.0;
 };
 

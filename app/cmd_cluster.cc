@@ -226,6 +226,7 @@ struct ActorFlags {
   int64_t actor_id = -1;
   int envs = 0;
   int64_t max_segments = 0;
+  std::string alive_file;
   bool check_config = false;
 };
 
@@ -252,6 +253,7 @@ int RunActor(const ActorFlags& f) {
   o.actor_id = f.actor_id >= 0 ? static_cast<uint32_t>(f.actor_id) : HostnameHash();
   o.num_envs = f.envs > 0 ? f.envs : cfg.cluster.envs_per_actor;
   o.max_segments = f.max_segments;
+  o.alive_file = f.alive_file;
   if (f.check_config) {
     std::cerr << "perch actor: config " << f.config << " and flags OK\n";
     return 0;
@@ -1450,6 +1452,8 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   a->add_option("--actor-id", af->actor_id, "actor id (default: hash of the host name)");
   a->add_option("--envs", af->envs, "envs in this process (default: cluster.envs_per_actor)");
   a->add_option("--max-segments", af->max_segments, "stop after this many segments per env");
+  a->add_option("--alive-file", af->alive_file,
+                "touched at every heartbeat (a liveness probe checks its age)");
   a->add_option("--set", af->sets, "override a config field: section.field=VALUE (repeatable)");
   a->add_flag("--check-config", af->check_config, "validate config and flags, then exit");
   a->callback([af] { RunActor(*af); });

@@ -4,9 +4,11 @@
 #include <netinet/in.h>
 #include <signal.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <ctime>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -218,15 +220,19 @@ TEST(TrainLauncherTest, ReportsAStoppedLearnerAndActorsThatCannotReachIt) {
   };
   int rp = 0, wp = 0;
   const int fd_r = hold(&rp), fd_w = hold(&wp);
-  const pid_t actor =
-      Spawn({PerchBin(), "actor", "--config", cfg, "--learner-host", "127.0.0.1", "--rollout-port",
-             std::to_string(rp), "--weights-port", std::to_string(wp)},
-            dir + "/actor.log");
+  const pid_t actor = Spawn(
+      {PerchBin(), "actor", "--config", cfg, "--learner-host", "127.0.0.1", "--rollout-port",
+       std::to_string(rp), "--weights-port", std::to_string(wp), "--alive-file", dir + "/alive"},
+      dir + "/actor.log");
   const bool said = WaitUntil(
       [&] {
         return ReadFile(dir + "/actor.log").find("cannot reach the learner") != std::string::npos;
       },
       15.0);
+  // Waiting for its learner, the actor still touches its liveness file (k8s/actors.yaml).
+  struct stat st {};
+  EXPECT_EQ(::stat((dir + "/alive").c_str(), &st), 0);
+  EXPECT_LE(std::time(nullptr) - st.st_mtime, 3);
   Stop(actor, 5.0);
   ::close(fd_r);
   ::close(fd_w);
