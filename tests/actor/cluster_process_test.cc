@@ -453,6 +453,12 @@ TEST_F(AttackTest, TheRunKeepsTrainingWithFiniteWeightsAndResumesAfterEveryAttac
   proto::ActorMessage nan = segment();
   nan.mutable_segment()->mutable_rollout()->set_values(0, std::nanf(""));
   send(nan);
+  // A NaN episode return (the console's and the success target's input).
+  proto::ActorMessage nan_return = segment();
+  proto::EpisodeStats* e = nan_return.mutable_segment()->add_episodes();
+  e->set_length(16);
+  e->set_episode_return(std::nan(""));
+  send(nan_return);
   // Heartbeats with 20,000 made-up instance ids.
   for (int i = 0; i < 20000; ++i) {
     proto::ActorMessage hb;
@@ -492,7 +498,8 @@ TEST_F(AttackTest, TheRunKeepsTrainingWithFiniteWeightsAndResumesAfterEveryAttac
                Scrape(l.metrics_port, "perch_rejected_by_reason_total{reason=\"out_of_range\"}")) +
       std::max(0.0,
                Scrape(l.metrics_port, "perch_rejected_by_reason_total{reason=\"non_finite\"}"));
-  EXPECT_GE(refused, 3.0) << "the poisoned, huge and NaN segments";
+  EXPECT_GE(refused, 4.0) << "the poisoned, huge and NaN segments";
+  EXPECT_TRUE(std::isfinite(Scrape(l.metrics_port, "perch_return_mean")));
   EXPECT_TRUE(Alive(l.pid));
   for (int fd : stuck) ::close(fd);
   subs.clear();
