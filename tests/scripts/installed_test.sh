@@ -80,6 +80,8 @@ for manifest in "$tmp"/k8s/*.yaml; do
 import json, sys
 a = json.loads(sys.argv[1])
 for x in a: print(x)' "$cmd")
+    # Probes' exec commands (sh -c ...) are not perch command lines.
+    [[ "${argv[0]}" == perch || "${argv[0]}" == */perch ]] || continue
     args=()
     for a in "${argv[@]:1}"; do
       case "$a" in
