@@ -177,11 +177,7 @@ int RunLearner(const LearnerFlags& f) {
   }
   // What is known to fail at run time, found now: messages too small for the weights or a
   // segment, an init_from that is missing or not a compatible policy, clashing ports.
-  CheckMessageSizes(setup);
-  {
-    PpoLearner probe(setup.policy, setup.ppo, setup.seed);
-    ApplyInitFrom(setup, &probe);
-  }
+  CheckRunTimeConfig(setup);
   CheckDistinctEndpoints(
       {{"--rollout-bind", f.rollout_bind},
        {"--weights-bind", f.weights_bind},
@@ -331,13 +327,8 @@ int RunTrain(TrainFlags f) {
   CheckDistinctEndpoints({{"--rollout-port", "tcp://h:" + std::to_string(f.rollout_port)},
                           {"--weights-port", "tcp://h:" + std::to_string(f.weights_port)},
                           {"--metrics-port", "tcp://h:" + std::to_string(f.metrics_port)}});
-  {
-    // The learner would refuse these only after the actors started.
-    const LearnerSetup setup = MakeLearnerSetup(cfg);
-    CheckMessageSizes(setup);
-    PpoLearner probe(setup.policy, setup.ppo, setup.seed);
-    ApplyInitFrom(setup, &probe);
-  }
+  // The learner would refuse these only after the actors started.
+  CheckRunTimeConfig(MakeLearnerSetup(cfg));
   if (f.run_dir.empty()) {
     std::string base = f.config.substr(f.config.rfind('/') + 1);
     base = base.substr(0, base.rfind('.'));

@@ -306,10 +306,12 @@ void LearnerService::Resume() {
                counters_.updates(), counters_.samples());
 }
 
-void CheckMessageSizes(const LearnerSetup& setup) {
+void CheckRunTimeConfig(const LearnerSetup& setup) {
   // The weights message every actor must accept (its SUB drops bigger ones unread) and the
   // biggest segment the learner must accept (its PULL drops the sender's connection).
   PpoLearner ppo(setup.policy, setup.ppo, setup.seed);
+  // init_from exists and fits this run's policy (onto a throwaway learner).
+  ApplyInitFrom(setup, &ppo);
   proto::LearnerMessage m;
   m.set_wire_version(proto::WIRE_VERSION_CURRENT);
   ppo.ExportWeights(m.mutable_weights()->add_policies()->mutable_model());

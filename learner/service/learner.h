@@ -188,8 +188,9 @@ class LearnerService {
 // cluster.init_from onto a new run's learner (weights and normalizer; mapped to fewer inputs,
 // another sigma mode or wider layers as needed). ConfigError naming the file and the reason.
 void ApplyInitFrom(const LearnerSetup& setup, PpoLearner* ppo);
-// ConfigError when cluster.max_message_bytes cannot carry the weights or a whole segment.
-void CheckMessageSizes(const LearnerSetup& setup);
+// What would fail only once the run started, as a ConfigError now: cluster.max_message_bytes too
+// small for the weights or a whole segment, cluster.init_from missing or not a compatible policy.
+void CheckRunTimeConfig(const LearnerSetup& setup);
 
 // Cuts a torn last line (no newline) off a metrics.jsonl, so rows appended later stay parseable.
 void RepairMetricsFile(const std::string& path);

@@ -10,6 +10,7 @@
 
 #include <ctime>
 #include <fstream>
+#include <memory>
 #include <set>
 #include <sstream>
 #include <string>
@@ -44,6 +45,24 @@ std::set<pid_t> ActorChildren(pid_t train) {
   }
   return out;
 }
+
+// A loopback port this test holds (bound; listening when asked) so that nothing else takes it.
+struct HeldPort {
+  int fd = -1;
+  int port = 0;
+  explicit HeldPort(bool listen) {
+    fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    EXPECT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)), 0);
+    if (listen) EXPECT_EQ(::listen(fd, 1), 0);
+    socklen_t len = sizeof(a);
+    ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
+    port = ntohs(a.sin_port);
+  }
+  ~HeldPort() { ::close(fd); }
+};
 
 std::vector<std::string> TrainArgv(const std::string& cfg, const std::string& run_dir) {
   return {PerchBin(),       "train",
@@ -154,20 +173,13 @@ TEST(TrainLauncherTest, GivesUpOnALearnerThatFailsTheSameWayAgainAndAgain) {
   const std::string dir = TempDir("train-giveup");
   const std::string cfg =
       WriteConfig(dir, MockConfig({{"restart_backoff_ms", 50}, {"max_identical_failures", 3}}));
-  const int busy = PickFreePort();
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_port = htons(busy);
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)), 0);
-  ASSERT_EQ(::listen(fd, 1), 0);
+  auto busy = std::make_unique<HeldPort>(/*listen=*/true);
   std::vector<std::string> argv = TrainArgv(cfg, dir + "/run");
-  argv.back() = std::to_string(busy);  // --metrics-port
+  argv.back() = std::to_string(busy->port);  // --metrics-port
   const pid_t train = Spawn(argv, dir + "/train.log");
   int status = 0;
   const bool ended = WaitFor(train, 30.0, &status);
-  ::close(fd);
+  busy.reset();
   if (!ended) Stop(train, 5.0);
   ASSERT_TRUE(ended) << "still restarting after 30 s:\n" << ReadFile(dir + "/train.log");
   EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 1) << DescribeStatus(status);
@@ -206,24 +218,11 @@ TEST(TrainLauncherTest, ReportsAStoppedLearnerAndActorsThatCannotReachIt) {
 
   // An actor alone, its learner nowhere: a line every few seconds. Its ports are held (bound, not
   // listening) so that no other test's learner can take them meanwhile.
-  auto hold = [](int* port) {
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_port = 0;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a));
-    socklen_t len = sizeof(a);
-    ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-    *port = ntohs(a.sin_port);
-    return fd;
-  };
-  int rp = 0, wp = 0;
-  const int fd_r = hold(&rp), fd_w = hold(&wp);
-  const pid_t actor = Spawn(
-      {PerchBin(), "actor", "--config", cfg, "--learner-host", "127.0.0.1", "--rollout-port",
-       std::to_string(rp), "--weights-port", std::to_string(wp), "--alive-file", dir + "/alive"},
-      dir + "/actor.log");
+  const HeldPort rp(/*listen=*/false), wp(/*listen=*/false);
+  const pid_t actor = Spawn({PerchBin(), "actor", "--config", cfg, "--learner-host", "127.0.0.1",
+                             "--rollout-port", std::to_string(rp.port), "--weights-port",
+                             std::to_string(wp.port), "--alive-file", dir + "/alive"},
+                            dir + "/actor.log");
   const bool said = WaitUntil(
       [&] {
         return ReadFile(dir + "/actor.log").find("cannot reach the learner") != std::string::npos;
@@ -234,8 +233,6 @@ TEST(TrainLauncherTest, ReportsAStoppedLearnerAndActorsThatCannotReachIt) {
   EXPECT_EQ(::stat((dir + "/alive").c_str(), &st), 0);
   EXPECT_LE(std::time(nullptr) - st.st_mtime, 3);
   Stop(actor, 5.0);
-  ::close(fd_r);
-  ::close(fd_w);
   EXPECT_TRUE(said) << ReadFile(dir + "/actor.log");
 }
 
