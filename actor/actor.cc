@@ -49,8 +49,11 @@ ActorService::ActorService(zmq::context_t& ctx, const ActorSetup& setup,
     }
     env->Seed(rng_.NextU64());
     const uint64_t stream = (uint64_t{options_.actor_id} << 20) | static_cast<uint64_t>(i);
-    collectors_.push_back(
-        std::make_unique<HierarchicalCollector>(env, stream, setup_.cluster.hierarchy_meta_period));
+    collectors_.push_back(std::make_unique<RolloutCollector>(env, stream));
+    if (auto* f = dynamic_cast<FrozenPolicyEnv*>(env)) {
+      frozen_envs_.push_back(f);
+      frozen_ready_ = false;
+    }
   }
   push_.set(zmq::sockopt::immediate, 1);  // queue only to a connected learner
   push_.set(zmq::sockopt::sndhwm, options_.num_envs);
@@ -209,13 +212,14 @@ bool ActorService::PollWeights(int timeout_ms) {
     return false;
   }
   const proto::Weights& w = m.weights();
+  TakeFrozen(w);
   if (have_weights_ && w.run_id() == weights_run_id_ && w.version() == runner_.version()) {
     // Same weights: a republish for someone else, or a fresh credit grant for this version.
     if (w.credit_epoch() != credit_epoch_) TakeCredit(w);
     return false;
   }
   for (const proto::TaskPolicy& p : w.policies()) {
-    if (p.task() != task_) continue;
+    if (p.task() != task_ || p.frozen()) continue;
     try {
       runner_.LoadWeights(p.model());
     } catch (const ConfigError& e) {
@@ -245,10 +249,32 @@ bool ActorService::PollWeights(int timeout_ms) {
   return false;
 }
 
+void ActorService::TakeFrozen(const proto::Weights& w) {
+  if (frozen_ready_) return;  // the first set is kept: a run's subtasks never change
+  std::vector<FrozenPolicyData> frozen;
+  for (const proto::TaskPolicy& p : w.policies()) {
+    if (p.frozen()) frozen.push_back(FrozenPolicyFromProto(p));
+  }
+  if (frozen.empty()) return;
+  try {
+    for (FrozenPolicyEnv* e : frozen_envs_) e->SetFrozenPolicies(frozen);
+  } catch (const ConfigError& e) {
+    // Not this actor's to fix: the learner's subtasks do not fit this env (another build or
+    // config). Said once per message; the actor keeps waiting rather than crash-looping.
+    ++counters_.weights_rejected;
+    spdlog::error("actor {}: the learner's frozen policies do not fit this env: {}",
+                  options_.actor_id, e.what());
+    return;
+  }
+  frozen_ready_ = true;
+  std::string names;
+  for (const FrozenPolicyData& f : frozen) names += (names.empty() ? "" : ", ") + f.name;
+  spdlog::info("actor {}: frozen policies from the learner: {}", options_.actor_id, names);
+}
+
 void ActorService::Produce(size_t i, PolicyRunner* runner, Rollout* out, EpisodeStats* eps) {
   if (!options_.replay) {
-    const std::vector<PolicyRunner*> no_subtasks;
-    collectors_[i]->Collect(runner, no_subtasks, rng_, setup_.cluster.segment_steps, out, eps);
+    collectors_[i]->Collect(runner, rng_, setup_.cluster.segment_steps, out, eps);
     return;
   }
   const RecordedSegment& rec = (*options_.replay)[replay_next_++ % options_.replay->size()];
@@ -273,12 +299,21 @@ void ActorService::Run() {
   last_heartbeat_s_ = start_s_;
   SendHello();
   double waited_since = MonotonicSeconds();
-  while (!have_weights_ && !Stopping()) {
+  while ((!have_weights_ || !frozen_ready_) && !Stopping()) {
     PollWeights(200);
-    if (!have_weights_ && MonotonicSeconds() - waited_since > 10.0) {
-      spdlog::info("actor {}: waiting for weights from {}", options_.actor_id,
+    const double now = MonotonicSeconds();
+    if (have_weights_ && !frozen_ready_ && now - last_resubscribe_s_ > 2.0) {
+      // The frozen policies come with the first weights and with every new subscription: one
+      // missed (or refused) is asked for again by subscribing anew.
+      sub_.set(zmq::sockopt::unsubscribe, "");
+      sub_.set(zmq::sockopt::subscribe, "");
+      last_resubscribe_s_ = now;
+    }
+    if ((!have_weights_ || !frozen_ready_) && now - waited_since > 10.0) {
+      spdlog::info("actor {}: waiting for {} from {}", options_.actor_id,
+                   have_weights_ ? "the frozen subtask policies" : "weights",
                    options_.weights_connect);
-      waited_since = MonotonicSeconds();
+      waited_since = now;
     }
   }
   if (have_weights_) {

@@ -13,7 +13,6 @@
 #include <vector>
 #include <zmq.hpp>
 
-#include "actor/hierarchy.h"
 #include "common/env.h"
 #include "common/proto/wire.pb.h"
 #include "common/rng.h"
@@ -87,7 +86,8 @@ class ActorService {
   void SendHello();
   void MaybeHeartbeat();
   void TakeCredit(const proto::Weights& w);
-  void WaitForCredit();  // blocks while this version's credit is used up
+  void TakeFrozen(const proto::Weights& w);  // frozen policies for the envs that need them
+  void WaitForCredit();                      // blocks while this version's credit is used up
   const EnvSpec& spec() const { return options_.replay ? options_.replay_spec : envs_[0]->spec(); }
   // The next segment of stream i: stepped in its env, or replayed (paced).
   void Produce(size_t i, PolicyRunner* runner, Rollout* out, EpisodeStats* eps);
@@ -112,7 +112,11 @@ class ActorService {
   uint64_t credit_run_id_ = 0;
   uint64_t credit_version_ = ~uint64_t{0};
   std::vector<std::unique_ptr<Env>> envs_;
-  std::vector<std::unique_ptr<HierarchicalCollector>> collectors_;
+  std::vector<std::unique_ptr<RolloutCollector>> collectors_;
+  // Envs that run frozen policies (the meta env): they get the learner's before stepping.
+  std::vector<FrozenPolicyEnv*> frozen_envs_;
+  bool frozen_ready_ = true;  // every env in frozen_envs_ has its policies
+  double last_resubscribe_s_ = 0.0;
   Rng rng_;
   // cluster.simulated_lag: the newest weights versions received, newest first; each segment acts
   // with one drawn by lag_rng_ (its own stream, so the envs' randomness is the same as without).

@@ -3,6 +3,7 @@
 #include "common/config_file.h"
 
 #ifdef PERCH_HAVE_ENVS
+#include "tasks/meta_env.h"
 #include "tasks/task_env.h"
 #endif
 
@@ -34,14 +35,23 @@ ExperimentConfig ExperimentConfigFromJson(const Json& j, const std::string& ctx)
     // task under the other's name.
     std::string env_task = "stand";
     GetOptional(c.env, "task", env_task, ctx + ".env");
-    if (c.cluster.task == "meta" || c.cluster.hierarchy_enabled) {
+    if (c.cluster.hierarchy_enabled) {
       throw ConfigError(ctx +
-                        (c.cluster.task == "meta" ? ".cluster.task: \"meta\""
-                                                  : ".cluster.hierarchy_enabled: true") +
-                        ": no env runs the hierarchy yet (the meta env is issue 15's work); the "
-                        "bullet backend trains one subtask at a time");
+                        ".cluster.hierarchy_enabled: true: the hierarchy is trained with "
+                        "cluster.task \"meta\" on env.task \"sit_chair\" (the meta env)");
     }
-    if (!j.contains("cluster") || !j["cluster"].contains("task")) {
+    if (c.cluster.task == "meta") {
+      // The meta controller trains over the sit_chair env (tasks/meta_env.h).
+      if (env_task != "sit_chair") {
+        throw ConfigError(ctx + ".cluster.task: \"meta\" needs env.task \"sit_chair\", got \"" +
+                          env_task + "\"");
+      }
+      if (c.cluster.hierarchy_meta_period != 30) {
+        throw ConfigError(ctx +
+                          ".cluster.hierarchy_meta_period: the meta period is "
+                          "env.sit_chair.meta.period now (leave this at 30)");
+      }
+    } else if (!j.contains("cluster") || !j["cluster"].contains("task")) {
       c.cluster.task = env_task;  // derived when not given
       TaskFromName(env_task, ctx + ".env.task");
     } else if (c.cluster.task != env_task) {
@@ -52,7 +62,8 @@ ExperimentConfig ExperimentConfigFromJson(const Json& j, const std::string& ctx)
   return c;
 }
 
-ExperimentConfig LoadExperimentConfig(const std::string& path, const std::vector<std::string>& sets) {
+ExperimentConfig LoadExperimentConfig(const std::string& path,
+                                      const std::vector<std::string>& sets) {
   // Messages name the file; a field that came from --set is named the same way.
   const std::string& ctx = path;
   ExperimentConfig c = ExperimentConfigFromJson(LoadComposedConfig(path, sets), ctx);
@@ -81,7 +92,9 @@ std::unique_ptr<Env> MakeExperimentEnv(const ExperimentConfig& c) {
   if (c.env_backend == "mock") return std::make_unique<MockEnv>(c.mock_env);
 #ifdef PERCH_HAVE_ENVS
   // Any task by name (stand, walk, ...): tasks/ builds the humanoid-chair env with it.
-  return MakeTaskEnv(TaskEnvConfig::FromJson(c.env, c.source + ".env"));
+  const TaskEnvConfig tc = TaskEnvConfig::FromJson(c.env, c.source + ".env");
+  if (c.cluster.task == "meta") return std::make_unique<MetaEnv>(tc);
+  return MakeTaskEnv(tc);
 #else
   throw ConfigError(c.source + ".env_backend: \"bullet\": this build has no envs/ library");
 #endif
@@ -101,7 +114,31 @@ PolicyConfig ResolvePolicyConfig(const ExperimentConfig& c, const EnvSpec& spec)
   p["obs_dim"] = spec.obs_dim;
   if (!meta) p["act_dim"] = spec.act_dim;
   if (!p.contains("kind")) p["kind"] = meta ? "meta" : "gaussian";
+#ifdef PERCH_HAVE_ENVS
+  if (meta && c.env_backend == "bullet") {
+    // The switch's classes are the env's choice of subtasks; the target drives walk.
+    const MetaConfig m =
+        TaskEnvConfig::FromJson(c.env, c.source + ".env").Section<SitChairTaskConfig>().meta;
+    for (const char* k : {"num_choices", "target_choice", "act_dim"}) {
+      if (p.contains(k)) {
+        throw ConfigError(ctx + "." + k + ": set by env.sit_chair.meta.choices for the meta task");
+      }
+    }
+    p["num_choices"] = static_cast<int>(m.choices.size());
+    p["target_choice"] = m.target_choice();
+    p["act_dim"] = 2;
+  }
+#endif
   return PolicyConfigFromJson(p, ctx);
+}
+
+std::vector<FrozenPolicyData> ExperimentFrozenPolicies(const ExperimentConfig& c) {
+  if (c.cluster.task != "meta" || c.env_backend != "bullet") return {};
+#ifdef PERCH_HAVE_ENVS
+  return LoadFrozenPolicies(TaskEnvConfig::FromJson(c.env, c.source + ".env"));
+#else
+  throw ConfigError(c.source + ".cluster.task: \"meta\": this build has no tasks/ library");
+#endif
 }
 
 std::string CompatKey(const ExperimentConfig& c, const PolicyConfig& policy) {

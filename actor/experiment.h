@@ -48,6 +48,11 @@ std::unique_ptr<Env> MakeExperimentEnv(const ExperimentConfig& c);
 // that disagree with the env.
 PolicyConfig ResolvePolicyConfig(const ExperimentConfig& c, const EnvSpec& spec);
 
+// The frozen policies the trained task runs inside its env (meta: the subtasks named in
+// env.sit_chair.meta, read from their files and checked); empty for other tasks. The learner
+// ships them to the actors.
+std::vector<FrozenPolicyData> ExperimentFrozenPolicies(const ExperimentConfig& c);
+
 // What must match between a checkpoint and the config resuming from it: task, dims, network.
 std::string CompatKey(const ExperimentConfig& c, const PolicyConfig& policy);
 

@@ -1,5 +1,7 @@
 #include "actor/role_setup.h"
 
+#include "learner/service/wire.h"
+
 namespace perch {
 
 LearnerSetup MakeLearnerSetup(const ExperimentConfig& cfg) {
@@ -12,6 +14,9 @@ LearnerSetup MakeLearnerSetup(const ExperimentConfig& cfg) {
   s.resolved_config = ToJson(cfg);
   s.control_dt = env->spec().control_dt;
   s.compat_key = CompatKey(cfg, s.policy);
+  for (const FrozenPolicyData& f : ExperimentFrozenPolicies(cfg)) {
+    s.frozen.push_back(FrozenPolicyToProto(f));
+  }
   return s;
 }
 

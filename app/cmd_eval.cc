@@ -18,6 +18,9 @@
 #include "learner/service/checkpoint.h"
 #include "tasks/hierarchy.h"
 #include "tasks/local_train.h"
+#include "tasks/meta_env.h"
+#include "tasks/meta_eval.h"
+#include "tasks/model_source.h"
 #include "tasks/registry.h"
 #include "tasks/state_bank.h"
 #include "tasks/task_env.h"
@@ -38,46 +41,6 @@ struct ConfigOverrides {
   double target_turn_prob = -1.0;
   double start_noise = 0.02;  // turn / sit: start_joint_noise_rad for evaluation [rad]
 };
-
-// The experiment config saved with a model: a checkpoint's resolved config, or a run dir's
-// config.json. Null when the file carries none (a bare ModelWeights).
-Json SavedConfig(const std::string& model_path) {
-  namespace fs = std::filesystem;
-  if (fs::is_directory(model_path)) {
-    const fs::path cfg = fs::path(model_path) / "config.json";
-    return fs::exists(cfg) ? LoadJsonFile(cfg.string()) : Json();
-  }
-  std::ifstream f(model_path, std::ios::binary);
-  char magic[8] = {};
-  if (!f.read(magic, 8) || std::string(magic, 8) != "PERCHCKP") return Json();
-  const proto::Checkpoint c = ReadCheckpointFile(model_path);
-  if (c.resolved_config_json().empty()) return Json();
-  try {
-    return Json::parse(c.resolved_config_json());
-  } catch (const std::exception& e) {
-    throw ConfigError(model_path + ": saved config does not parse: " + e.what());
-  }
-}
-
-// A run dir's newest checkpoint; any other path as given.
-std::string ModelFile(const std::string& model_path) {
-  namespace fs = std::filesystem;
-  if (!fs::is_directory(model_path)) return model_path;
-  std::string newest;
-  const fs::path dir = fs::path(model_path) / "checkpoints";
-  if (fs::is_directory(dir)) {
-    for (const auto& e : fs::directory_iterator(dir)) {
-      const std::string n = e.path().filename().string();
-      if (n.rfind("ckpt-", 0) == 0 && n.size() > 4 && n.substr(n.size() - 4) == ".bin" &&
-          (newest.empty() || n > fs::path(newest).filename().string())) {
-        newest = e.path().string();
-      }
-    }
-  }
-  if (newest.empty())
-    throw ConfigError(model_path + ": a directory without checkpoints/ckpt-*.bin");
-  return newest;
-}
 
 // Task config: --config's, else the model's saved one, else the task's defaults; then the
 // command-line overrides. Warns when --config's task section differs from the saved one.
@@ -186,6 +149,8 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     int panel_px = 220;
     bool fixed_window = false;
     bool json = false;
+    int trials = 0;
+    int threads = std::max(1u, std::thread::hardware_concurrency());
   };
   auto o = std::make_shared<EvalOpts>();
   o->cfg.target_turn_prob = 0.0;  // eval measures the paper's targets, not a training curriculum
@@ -249,8 +214,14 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       ->check(CLI::Range(0, 1000000));
   cmd->add_flag("--force", o->force, "overwrite an existing --record file");
   cmd->add_flag("--json", o->json, "print one JSON object on stdout");
+  cmd->add_option("--trials", o->trials,
+                  "sit_chair (the meta controller): number of trials (default: --episodes)")
+      ->check(CLI::Range(1, 10000000));
+  cmd->add_option("--threads", o->threads, "sit_chair: threads (default: all cores)")
+      ->check(CLI::Range(1, 1024));
   auto chain = std::make_shared<ChainFlags>();
-  cmd->add_option("--zone", chain->zone, "chain: spawn zone (1 easy, 2 lateral, 3 rear)")
+  cmd->add_option("--zone", chain->zone,
+                  "chain and sit_chair: spawn zone (1 easy, 2 lateral, 3 rear)")
       ->capture_default_str()
       ->check(CLI::Range(1, 3));
   for (int id = 0; id < kNumSubtasks; ++id) {
@@ -336,6 +307,66 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     }
     if (o->model.empty()) throw ConfigError("--model: required (but for --task chain)");
     const TaskEnvConfig config = ResolveConfig(o->cfg, o->model);
+    if (config.env.task == "sit_chair") {
+      // The meta controller on the main task: the authors' zones as defined (whatever spawn the
+      // run trained with), walk start states from the evaluation bank (docs/meta.md).
+      TaskEnvConfig mc = config;
+      mc.env.spawn = SpawnConfig();
+      mc.env.spawn.zone = chain->zone;
+      mc.MutableSection<SitChairTaskConfig>().start.banks = {"data/banks/walk_end_poses_eval.bin"};
+      const std::string model_file = ModelFile(o->model);
+      std::vector<FrozenPolicyData> frozen = FrozenPoliciesIn(o->model);
+      if (frozen.empty()) frozen = LoadFrozenPolicies(mc);
+      MetaEvalOptions mo;
+      mo.trials = o->trials > 0 ? o->trials : o->eval.episodes;
+      mo.seed = o->eval.seed;
+      mo.stochastic = o->eval.stochastic;
+      mo.threads = o->threads;
+      const auto t0 = std::chrono::steady_clock::now();
+      const int every = std::max(1, mo.trials / 20);
+      mo.progress = [&](int done, int successes) {
+        if (done % every != 0 && done != mo.trials) return;
+        const double sec =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        std::cerr << "eval: " << done << "/" << mo.trials << " trials, success "
+                  << static_cast<double>(successes) / done << " so far, " << static_cast<int>(sec)
+                  << " s\n";
+      };
+      MetaTrialFrames ok, bad;
+      const bool film = !o->filmstrip.empty();
+      Json result = EvaluateMeta(mc, LoadModelFile(model_file), frozen, mo, film ? &ok : nullptr,
+                                 film ? &bad : nullptr);
+      result["model"] = model_file;
+      result["wall_s"] =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      if (film) {
+        const Chair chair = Chair::Load(mc.env.ChairPath());
+        const HumanoidModel model = HumanoidModel::Load(mc.env.HumanoidPath());
+        FilmstripOptions fo;
+        fo.panel_px = o->panel_px;
+        fo.follow = !o->fixed_window;
+        // <name>.png: the first success; <name>_failure.png: the first failure.
+        const std::string base = o->filmstrip.substr(0, o->filmstrip.rfind(".png"));
+        for (const MetaTrialFrames* t : {&ok, &bad}) {
+          if (t->frames.empty()) continue;
+          const std::string path = t->success ? base + ".png" : base + "_failure.png";
+          RenderFilmstrip(model, &chair, mc.env.chair_placement.Transform(),
+                          PickFrames(t->frames, o->frames), fo)
+              .SavePng(path);
+          result[t->success ? "filmstrip_success" : "filmstrip_failure"] = {{"path", path},
+                                                                            {"trial", t->trial}};
+        }
+      }
+      if (o->json) {
+        std::cout << result.dump() << "\n";
+      } else {
+        std::cout << "sit_chair zone " << chain->zone << ": success_rate " << result["success_rate"]
+                  << " " << result["success_ci95"].dump() << ", min_dist "
+                  << result["min_dist_mean_m"] << " +- " << result["min_dist_std_m"] << " m, falls "
+                  << result["fall_rate"] << "\n";
+      }
+      return;
+    }
     const std::string model_file = ModelFile(o->model);
     const proto::ModelWeights weights = LoadModelFile(model_file);
     EvalRecording rec;

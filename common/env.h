@@ -39,6 +39,27 @@ struct StepResult {
   bool success = false;  // the task's success test passed at this step (once per episode)
 };
 
+// A policy an env runs inside its own Step (the hierarchy's frozen subtasks, paper Sec. 5): the
+// env's concern, shipped to actors by the learner, so the actor loop only passes bytes along.
+struct FrozenPolicyData {
+  std::string name;          // the subtask: "walk", "turn_left", "turn_right", "sit"
+  std::string model;         // serialized proto::ModelWeights
+  std::string saved_config;  // the experiment config saved with the model (JSON; may be empty)
+  std::string source;        // where it came from (file and sha256), for records
+};
+
+class Env;
+
+// Implemented by envs that need frozen policies before they can step (the meta env).
+class FrozenPolicyEnv {
+ public:
+  virtual ~FrozenPolicyEnv() = default;
+  virtual std::vector<std::string> frozen_policy_names() const = 0;  // the ones it needs
+  virtual bool has_frozen_policies() const = 0;
+  // ConfigError naming the policy when one is missing or does not fit.
+  virtual void SetFrozenPolicies(const std::vector<FrozenPolicyData>& policies) = 0;
+};
+
 class Env {
  public:
   virtual ~Env() = default;

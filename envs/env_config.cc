@@ -70,8 +70,8 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
     const Json& s = j["spawn"];
     const std::string sc = ctx + ".spawn";
     CheckKnownKeys(s,
-                   {"zone", "x", "y", "yaw_deg", "center_x", "center_y", "radius", "zone1_deg",
-                    "zone2_deg", "zone3_deg"},
+                   {"zone", "x", "y", "yaw_deg", "center_x", "center_y", "radius", "radius_max",
+                    "yaw_noise_deg", "zone1_deg", "zone2_deg", "zone3_deg"},
                    sc);
     GetOptional(s, "zone", c.spawn.zone, sc);
     GetOptional(s, "x", c.spawn.x, sc);
@@ -80,12 +80,20 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
     GetOptional(s, "center_x", c.spawn.center_x, sc);
     GetOptional(s, "center_y", c.spawn.center_y, sc);
     GetOptional(s, "radius", c.spawn.radius, sc);
+    GetOptional(s, "radius_max", c.spawn.radius_max, sc);
+    GetOptional(s, "yaw_noise_deg", c.spawn.yaw_noise_deg, sc);
     GetOptional(s, "zone1_deg", c.spawn.zone1_deg, sc);
     GetOptional(s, "zone2_deg", c.spawn.zone2_deg, sc);
     GetOptional(s, "zone3_deg", c.spawn.zone3_deg, sc);
     if (c.spawn.zone < 0 || c.spawn.zone > 3)
       throw ConfigError(sc + ".zone: expected 0, 1, 2 or 3");
     if (!(c.spawn.radius >= 0.0)) throw ConfigError(sc + ".radius: must be >= 0");
+    if (!(c.spawn.radius_max == 0.0 || c.spawn.radius_max >= c.spawn.radius)) {
+      throw ConfigError(sc + ".radius_max: must be 0 or >= radius");
+    }
+    if (!(c.spawn.yaw_noise_deg >= 0.0 && c.spawn.yaw_noise_deg <= 180.0)) {
+      throw ConfigError(sc + ".yaw_noise_deg: must be in [0, 180]");
+    }
     CheckRange(c.spawn.zone1_deg, sc + ".zone1_deg");
     CheckRange(c.spawn.zone2_deg, sc + ".zone2_deg");
     CheckRange(c.spawn.zone3_deg, sc + ".zone3_deg");
@@ -199,6 +207,8 @@ Json EnvConfig::ToJson() const {
         {"center_x", spawn.center_x},
         {"center_y", spawn.center_y},
         {"radius", spawn.radius},
+        {"radius_max", spawn.radius_max},
+        {"yaw_noise_deg", spawn.yaw_noise_deg},
         {"zone1_deg", spawn.zone1_deg},
         {"zone2_deg", spawn.zone2_deg},
         {"zone3_deg", spawn.zone3_deg}}},

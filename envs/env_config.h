@@ -37,6 +37,11 @@ struct SpawnConfig {
   double x = 1.5, y = 0.0, yaw_deg = 180.0;  // zone 0 [m, m, deg]
   double center_x = 0.45, center_y = 0.0;    // authors' Zone 1 centre [m]
   double radius = 1.5;                       // [m]
+  // > radius: the radius is drawn from U(radius, radius_max) (the authors' walk-only meta spawns,
+  // notes 4.7: U(2, 5) m). 0: always `radius`.
+  double radius_max = 0.0;  // [m]
+  // Facing the centre +- U(-yaw_noise_deg, yaw_noise_deg) (walk-only "easy": 45) [deg].
+  double yaw_noise_deg = 0.0;
   std::array<double, 2> zone1_deg{0.0, 90.0};    // authors' code: theta ~ U(-90, 90) deg
   std::array<double, 2> zone2_deg{90.0, 135.0};  // our proposal (notes 6): lateral sides
   std::array<double, 2> zone3_deg{135.0, 180.0};  // our proposal: rear side

@@ -12,13 +12,20 @@ SpawnPose SampleSpawn(const SpawnConfig& c, Rng& rng) {
     s.yaw_added = c.yaw_deg * M_PI / 180.0;
     return s;
   }
-  const std::array<double, 2>& r = c.zone == 1 ? c.zone1_deg : c.zone == 2 ? c.zone2_deg : c.zone3_deg;
+  const std::array<double, 2>& r = c.zone == 1   ? c.zone1_deg
+                                   : c.zone == 2 ? c.zone2_deg
+                                                 : c.zone3_deg;
   const double magnitude = rng.Uniform(r[0], r[1]) * M_PI / 180.0;
   const double sign = rng.Uniform() < 0.5 ? -1.0 : 1.0;
   s.theta = sign * magnitude;
-  s.x = c.center_x + c.radius * std::cos(s.theta);
-  s.y = c.center_y + c.radius * std::sin(s.theta);
+  // Extra draws only when asked for, so the authors' zones keep their random streams.
+  const double radius = c.radius_max > c.radius ? rng.Uniform(c.radius, c.radius_max) : c.radius;
+  s.x = c.center_x + radius * std::cos(s.theta);
+  s.y = c.center_y + radius * std::sin(s.theta);
   s.yaw_added = s.theta + M_PI;  // facing the centre
+  if (c.yaw_noise_deg > 0.0) {
+    s.yaw_added += rng.Uniform(-c.yaw_noise_deg, c.yaw_noise_deg) * M_PI / 180.0;
+  }
   return s;
 }
 

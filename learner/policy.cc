@@ -91,7 +91,8 @@ PolicyConfig PolicyConfigFromJson(const Json& j, const std::string& ctx) {
   if (c.obs_dim <= 0) throw ConfigError(ctx + ".obs_dim: must be > 0");
   if (c.act_dim <= 0) throw ConfigError(ctx + ".act_dim: must be > 0");
   if (c.kind == PolicyKind::kMeta) {
-    if (c.num_choices < 2) throw ConfigError(ctx + ".num_choices: must be >= 2");
+    // 1: the walk-only pre-training (notes 4.7), whose switch has one class.
+    if (c.num_choices < 1) throw ConfigError(ctx + ".num_choices: must be >= 1");
     if (c.target_choice < 0 || c.target_choice >= c.num_choices) {
       throw ConfigError(ctx + ".target_choice: must be in [0, num_choices)");
     }
@@ -104,9 +105,9 @@ ActorCritic::ActorCritic(const PolicyConfig& config, uint64_t seed) : config_(co
     throw ConfigError("policy: obs_dim and act_dim must be > 0");
   }
   const bool meta = config.kind == PolicyKind::kMeta;
-  if (meta && (config.num_choices < 2 || config.target_choice < 0 ||
+  if (meta && (config.num_choices < 1 || config.target_choice < 0 ||
                config.target_choice >= config.num_choices)) {
-    throw ConfigError("policy: meta needs num_choices >= 2 and target_choice in range");
+    throw ConfigError("policy: meta needs num_choices >= 1 and target_choice in range");
   }
   if (!meta) config_.num_choices = 0, config_.target_choice = 0;
   const int head = meta ? config.num_choices + config.act_dim : config.act_dim;
@@ -398,6 +399,53 @@ proto::ModelWeights DropTrailingInputs(const proto::ModelWeights& w, int obs_dim
     out.mutable_obs_stats()->mutable_mean()->Truncate(obs_dim);
     out.mutable_obs_stats()->mutable_var()->Truncate(obs_dim);
   }
+  return out;
+}
+
+proto::ModelWeights WidenMetaChoices(const proto::ModelWeights& w, const PolicyConfig& mine,
+                                     uint64_t seed, const std::string& ctx) {
+  const PolicyConfig src_c = PolicyConfigFromShape(w.shape(), ctx);
+  if (src_c.kind != PolicyKind::kMeta || mine.kind != PolicyKind::kMeta ||
+      src_c.num_choices >= mine.num_choices) {
+    throw ConfigError(ctx + ": only a meta policy with fewer switch classes can start this one");
+  }
+  PolicyConfig same = mine;  // the source as it would be with this run's classes
+  same.num_choices = src_c.num_choices;
+  same.target_choice = src_c.target_choice;
+  if (ToJson(same) != ToJson(src_c)) {
+    throw ConfigError(ctx +
+                      ": differs from this run's meta policy in more than its switch classes");
+  }
+  const ActorCritic src(src_c, 0);
+  if (w.params_size() != src.num_params()) {
+    throw ConfigError(ctx + ": params has " + std::to_string(w.params_size()) +
+                      " values, its shape needs " + std::to_string(src.num_params()));
+  }
+  ActorCritic dst(mine, seed);  // fresh switch head
+  const float* sp = w.params().data();
+  float* dp = dst.params().data();
+  const std::vector<int>& sizes = src.policy_mlp().sizes();
+  // Hidden layers: identical shapes, one contiguous block.
+  int hidden_params = 0;
+  for (size_t l = 0; l + 2 < sizes.size(); ++l)
+    hidden_params += sizes[l + 1] * sizes[l] + sizes[l + 1];
+  std::copy(sp, sp + hidden_params, dp);
+  // Output layer W [head x h] column-major, then b [head]: the target rows follow the logits.
+  const int h = sizes[sizes.size() - 2];
+  const int sh = src.head_dim(), dh = dst.head_dim(), k = mine.act_dim;
+  const int sc = src_c.num_choices, dc = mine.num_choices;
+  for (int col = 0; col < h; ++col) {
+    for (int r = 0; r < k; ++r) {
+      dp[hidden_params + col * dh + dc + r] = sp[hidden_params + col * sh + sc + r];
+    }
+  }
+  for (int r = 0; r < k; ++r)
+    dp[hidden_params + h * dh + dc + r] = sp[hidden_params + h * sh + sc + r];
+  std::copy(sp + src.log_std_offset(), sp + src.log_std_offset() + k, dp + dst.log_std_offset());
+  std::copy(sp + src.value_offset(), sp + src.num_params(), dp + dst.value_offset());
+  proto::ModelWeights out = w;
+  dst.GetShape(out.mutable_shape());
+  out.mutable_params()->Assign(dst.params().data(), dst.params().data() + dst.num_params());
   return out;
 }
 

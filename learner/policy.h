@@ -158,6 +158,13 @@ proto::ModelWeights DropTrailingInputs(const proto::ModelWeights& w, int obs_dim
 proto::ModelWeights ConvertStdMode(const proto::ModelWeights& w, const PolicyConfig& mine,
                                    const std::string& ctx);
 
+// A meta policy with fewer switch classes (the walk-only pre-training: {walk}) as the start of one
+// with more (`mine`): trunk, target head, log-std, value network and observation statistics
+// copied; the switch head newly initialised from `seed` (its shape differs), as the authors
+// warm-started the full meta controller (notes 6). ConfigError when the two differ otherwise.
+proto::ModelWeights WidenMetaChoices(const proto::ModelWeights& w, const PolicyConfig& mine,
+                                     uint64_t seed, const std::string& ctx);
+
 // What an actor runs every control step: one observation in, action + log-prob + value out,
 // no allocation per step. One runner per thread (it owns scratch buffers).
 //

@@ -26,11 +26,79 @@ const char* SubtaskName(int id) {
   return "?";
 }
 
+int SubtaskIdOf(const std::string& name) {
+  for (int id = 0; id < kNumSubtasks; ++id) {
+    if (name == SubtaskName(id)) return id;
+  }
+  return -1;
+}
+
+MetaConfig MetaConfig::FromJson(const Json& j, const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
+  CheckKnownKeys(j, {"choices", "period", "subtask_stochastic", "subtasks"}, ctx);
+  MetaConfig c;
+  GetOptional(j, "choices", c.choices, ctx);
+  GetOptional(j, "period", c.period, ctx);
+  GetOptional(j, "subtask_stochastic", c.subtask_stochastic, ctx);
+  if (j.contains("subtasks")) {
+    const Json& s = j["subtasks"];
+    const std::string sc = ctx + ".subtasks";
+    if (!s.is_object()) throw ConfigError(sc + ": expected an object");
+    CheckKnownKeys(s, {"turn_left", "turn_right", "sit", "walk"}, sc);
+    for (int id = 0; id < kNumSubtasks; ++id) GetOptional(s, SubtaskName(id), c.subtasks[id], sc);
+  }
+  if (c.period < 1) throw ConfigError(ctx + ".period: must be >= 1");
+  if (c.choices.empty()) throw ConfigError(ctx + ".choices: must not be empty");
+  for (size_t i = 0; i < c.choices.size(); ++i) {
+    if (SubtaskIdOf(c.choices[i]) < 0) {
+      throw ConfigError(ctx + ".choices[" + std::to_string(i) + "]: unknown subtask \"" +
+                        c.choices[i] + "\" (turn_left, turn_right, sit, walk)");
+    }
+    for (size_t k = 0; k < i; ++k) {
+      if (c.choices[k] == c.choices[i]) {
+        throw ConfigError(ctx + ".choices: \"" + c.choices[i] + "\" twice");
+      }
+    }
+  }
+  if (c.target_choice() < 0) {
+    throw ConfigError(ctx + ".choices: must contain walk (the meta's target head drives it)");
+  }
+  for (int id : c.choice_ids()) {
+    if (c.subtasks[id].empty()) {
+      throw ConfigError(ctx + ".subtasks." + SubtaskName(id) +
+                        ": no checkpoint for a chosen subtask");
+    }
+  }
+  return c;
+}
+
+Json MetaConfig::ToJson() const {
+  Json subs = Json::object();
+  for (int id = 0; id < kNumSubtasks; ++id) subs[SubtaskName(id)] = subtasks[id];
+  return Json{{"choices", choices},
+              {"period", period},
+              {"subtask_stochastic", subtask_stochastic},
+              {"subtasks", subs}};
+}
+
+int MetaConfig::target_choice() const {
+  for (size_t i = 0; i < choices.size(); ++i) {
+    if (choices[i] == "walk") return static_cast<int>(i);
+  }
+  return -1;
+}
+
+std::vector<int> MetaConfig::choice_ids() const {
+  std::vector<int> ids;
+  for (const std::string& c : choices) ids.push_back(SubtaskIdOf(c));
+  return ids;
+}
+
 SitChairTaskConfig SitChairTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
   CheckKnownKeys(j,
                  {"support_reward", "approach_weight", "min_root_z", "sit_min_root_z",
-                  "max_episode_steps", "start", "success_contact_s"},
+                  "max_episode_steps", "start", "success_contact_s", "meta"},
                  ctx);
   SitChairTaskConfig c;
   GetOptional(j, "support_reward", c.support_reward, ctx);
@@ -40,6 +108,7 @@ SitChairTaskConfig SitChairTaskConfig::FromJson(const Json& j, const std::string
   GetOptional(j, "max_episode_steps", c.max_episode_steps, ctx);
   if (j.contains("start")) c.start = BankStartConfig::FromJson(j["start"], ctx + ".start");
   GetOptional(j, "success_contact_s", c.success_contact_s, ctx);
+  if (j.contains("meta")) c.meta = MetaConfig::FromJson(j["meta"], ctx + ".meta");
   if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
   if (!(c.success_contact_s > 0)) throw ConfigError(ctx + ".success_contact_s: must be > 0");
   return c;
@@ -52,7 +121,8 @@ Json SitChairTaskConfig::ToJson() const {
               {"sit_min_root_z", sit_min_root_z},
               {"max_episode_steps", max_episode_steps},
               {"start", start.ToJson()},
-              {"success_contact_s", success_contact_s}};
+              {"success_contact_s", success_contact_s},
+              {"meta", meta.ToJson()}};
 }
 
 SitChairTask::SitChairTask(const SitChairTaskConfig& c, double control_dt)
@@ -103,8 +173,8 @@ void SitChairTask::LoadMemory(const Json& j) {
 // ---- subtask policies -------------------------------------------------------------------------
 
 double TurnHeadingSource::GoalYaw(double yaw0, double t) const {
-  const double f = std::clamp((t + lookahead_s) / frame_time, 0.0,
-                              static_cast<double>(clip_yaw.size() - 1));
+  const double f =
+      std::clamp((t + lookahead_s) / frame_time, 0.0, static_cast<double>(clip_yaw.size() - 1));
   const int i = std::min(static_cast<int>(f), static_cast<int>(clip_yaw.size()) - 2);
   const double w = f - i;
   return yaw0 + (1.0 - w) * clip_yaw[i] + w * clip_yaw[i + 1] - clip_yaw[0];
@@ -125,7 +195,8 @@ std::unique_ptr<TurnHeadingSource> TurnHeadingSource::FromSavedConfig(const Json
     const double y = RpyFromQuat(m.frame(i).root_rot).z();
     h->clip_yaw.push_back(i == 0 ? y : h->clip_yaw.back() + AngleDiff(y, h->clip_yaw.back()));
   }
-  if (h->clip_yaw.size() < 2) throw ConfigError(ctx + ": turn clip " + t.motion_file + " too short");
+  if (h->clip_yaw.size() < 2)
+    throw ConfigError(ctx + ": turn clip " + t.motion_file + " too short");
   return h;
 }
 
@@ -137,8 +208,10 @@ ObsLayout SubtaskPolicies::Layout(int id) const {
 
 SubtaskPolicies::SubtaskPolicies(const std::array<proto::ModelWeights, kNumSubtasks>& models,
                                  const std::array<std::string, kNumSubtasks>& names,
-                                 const std::array<Json, kNumSubtasks>& saved_configs) {
+                                 const std::array<Json, kNumSubtasks>& saved_configs,
+                                 const std::array<bool, kNumSubtasks>& needed) {
   for (int id = 0; id < kNumSubtasks; ++id) {
+    if (!needed[id]) continue;
     const std::string ctx = std::string(SubtaskName(id)) + " policy " + names[id];
     if (id == kLeftTurn || id == kRightTurn) {
       heading_[id] = TurnHeadingSource::FromSavedConfig(saved_configs[id], ctx);
@@ -146,11 +219,13 @@ SubtaskPolicies::SubtaskPolicies(const std::array<proto::ModelWeights, kNumSubta
     const PolicyConfig pc = PolicyConfigFromShape(models[id].shape(), ctx);
     const int want = ObsLayoutDim(Layout(id));
     if (pc.kind != PolicyKind::kGaussian || pc.obs_dim != want || pc.act_dim != 21) {
-      std::string why = "the " + std::string(SubtaskName(id)) + " subtask needs a gaussian policy over " +
-                        std::to_string(want) + " observations and 21 torques";
+      std::string why = "the " + std::string(SubtaskName(id)) +
+                        " subtask needs a gaussian policy over " + std::to_string(want) +
+                        " observations and 21 torques";
       if ((id == kLeftTurn || id == kRightTurn) && pc.obs_dim == 52 && heading_[id] == nullptr) {
-        why += " (a 52-input turn needs its saved config with heading_goal: a checkpoint, not a "
-               "bare policy file)";
+        why +=
+            " (a 52-input turn needs its saved config with heading_goal: a checkpoint, not a "
+            "bare policy file)";
       }
       throw ConfigError(ctx + ": observes " + std::to_string(pc.obs_dim) + " and acts " +
                         std::to_string(pc.act_dim) + ", " + why);
@@ -170,6 +245,9 @@ void SubtaskPolicies::Begin(int id, const HumanoidChairEnv& env) {
 
 void SubtaskPolicies::Act(int id, const HumanoidChairEnv& env, Rng& rng, bool deterministic,
                           float* action) {
+  if (runners_[id] == nullptr) {
+    throw std::logic_error(std::string("SubtaskPolicies: no policy for ") + SubtaskName(id));
+  }
   env.WriteObservation(Layout(id), obs_.data());
   if (heading_[id] != nullptr) {
     // The goal slots read the turn's reference heading instead of the walk target.
@@ -185,7 +263,7 @@ void SubtaskPolicies::Act(int id, const HumanoidChairEnv& env, Rng& rng, bool de
 
 Json EvaluateChain(const TaskEnvConfig& config,
                    const std::array<proto::ModelWeights, kNumSubtasks>& models,
-                   const std::array<std::string, kNumSubtasks>& paths, 
+                   const std::array<std::string, kNumSubtasks>& paths,
                    const std::array<Json, kNumSubtasks>& saved_configs, const ChainOptions& o,
                    std::vector<PoseFrame>* frames) {
   if (config.env.task != "sit_chair") {

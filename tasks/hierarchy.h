@@ -26,7 +26,30 @@ namespace perch {
 
 // The authors' subtask indices of the meta switch (alphabetical keys, notes 4.7).
 enum SubtaskId { kLeftTurn = 0, kRightTurn = 1, kSit = 2, kWalk = 3, kNumSubtasks = 4 };
-const char* SubtaskName(int id);  // "turn_left", "turn_right", "sit", "walk"
+const char* SubtaskName(int id);           // "turn_left", "turn_right", "sit", "walk"
+int SubtaskIdOf(const std::string& name);  // -1 when unknown
+
+// The meta controller's view of the hierarchy (paper Sec. 5; notes 4.7): which subtasks its switch
+// chooses from, which frozen checkpoints run them, and how often it decides.
+struct MetaConfig {
+  // The switch's classes in order (authors: alphabetical keys, 0 left turn .. 3 walk). The
+  // walk-only pre-training uses {"walk"}; the one-turn baselines (Table 3) drop a turn. Must
+  // contain walk (the target head belongs to it).
+  std::vector<std::string> choices{"turn_left", "turn_right", "sit", "walk"};
+  int period = 30;                 // control steps per meta decision (0.495 s, about 2 Hz)
+  bool subtask_stochastic = true;  // subtasks sample their actions (authors, notes 9.7)
+  // Frozen subtask checkpoints by SubtaskId (the fine-tuned ones, as the authors' chain).
+  std::array<std::string, 4> subtasks{"models/turn_left_from_walk/policy.bin",
+                                      "models/turn_right_from_walk/policy.bin",
+                                      "models/sit_from_turn/policy.bin",
+                                      "models/walk_stage2_fallrestart/checkpoints/"
+                                      "ckpt-0000013900.bin"};
+
+  static MetaConfig FromJson(const Json& j, const std::string& ctx);
+  Json ToJson() const;
+  int target_choice() const;            // index of walk in choices
+  std::vector<int> choice_ids() const;  // SubtaskId per class
+};
 
 struct SitChairTaskConfig {
   // Eq. 8: `support_reward` while the pelvis is on the seat, else approach_weight x (-V_sit).
@@ -40,6 +63,7 @@ struct SitChairTaskConfig {
   // the spawn zone's centre, placed at the spawn (env.spawn). Empty: the env's init pose.
   BankStartConfig start{{"data/banks/walk_end_poses.bin"}, 1.0};
   double success_contact_s = 3.0;  // paper Sec. 7
+  MetaConfig meta;
 
   static SitChairTaskConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;
@@ -91,9 +115,11 @@ class SubtaskPolicies {
   // models in SubtaskId order; each must observe its layout (ConfigError naming the subtask and
   // the file otherwise). saved_configs (the experiment config saved with each model, may be null
   // JSON) tell a heading-goal turn (52 inputs) from the paper's (50).
+  // needed: which subtasks get a runner (the others' models are not read; Act on them throws).
   SubtaskPolicies(const std::array<proto::ModelWeights, kNumSubtasks>& models,
                   const std::array<std::string, kNumSubtasks>& names_for_errors,
-                  const std::array<Json, kNumSubtasks>& saved_configs = {});
+                  const std::array<Json, kNumSubtasks>& saved_configs = {},
+                  const std::array<bool, kNumSubtasks>& needed = {true, true, true, true});
   // Subtask `id` becomes active now (a heading-goal turn starts its clip clock).
   void Begin(int id, const HumanoidChairEnv& env);
   // The action of subtask `id` on the env's current state (its own observation and normaliser).
@@ -114,10 +140,10 @@ struct ChainOptions {
   int episodes = 100;
   uint64_t seed = 0;
   bool stochastic = false;
-  double approach_dist_m = 0.6;  // walk target: this far in front of the seat target
-  double reach_m = 0.25;         // walk -> turn when body_xyz is this close to the target
-  double max_walk_s = 8.0;       // walk -> turn at the latest
-  double turn_s = 3.2;           // turn -> sit after this long (the turn clips last 2.9 s)
+  double approach_dist_m = 0.6;         // walk target: this far in front of the seat target
+  double reach_m = 0.25;                // walk -> turn when body_xyz is this close to the target
+  double max_walk_s = 8.0;              // walk -> turn at the latest
+  double turn_s = 3.2;                  // turn -> sit after this long (the turn clips last 2.9 s)
   EpisodeRecorder* recorder = nullptr;  // perch eval --record (not owned)
 };
 
@@ -126,7 +152,7 @@ struct ChainOptions {
 // active subtask) go to `frames` when not null.
 Json EvaluateChain(const TaskEnvConfig& config,
                    const std::array<proto::ModelWeights, kNumSubtasks>& models,
-                   const std::array<std::string, kNumSubtasks>& model_paths, 
+                   const std::array<std::string, kNumSubtasks>& model_paths,
                    const std::array<Json, kNumSubtasks>& saved_configs, const ChainOptions& o,
                    std::vector<PoseFrame>* frames);
 

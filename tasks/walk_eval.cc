@@ -13,75 +13,7 @@
 #include "tasks/foot_sliding.h"
 
 namespace perch {
-namespace {
-
-constexpr char kCheckpointMagic[8] = {'P', 'E', 'R', 'C', 'H', 'C', 'K', 'P'};
-constexpr size_t kCheckpointHeader = 8 + 4 + 8 + 4;  // magic, format, length, CRC-32
-
-// CRC-32 (IEEE, reflected), as learner/service/checkpoint.cc frames checkpoints.
-uint32_t Crc32(const std::string& s) {
-  uint32_t crc = 0xFFFFFFFFu;
-  for (unsigned char b : s) {
-    crc ^= b;
-    for (int k = 0; k < 8; ++k) crc = (crc & 1) ? 0xEDB88320u ^ (crc >> 1) : crc >> 1;
-  }
-  return crc ^ 0xFFFFFFFFu;
-}
-
-template <typename T>
-T ReadLe(const std::string& s, size_t at) {
-  T v = 0;
-  for (size_t i = 0; i < sizeof(T); ++i)
-    v |= static_cast<T>(static_cast<unsigned char>(s[at + i])) << (8 * i);
-  return v;
-}
-
-// A parsed ModelWeights that is self-consistent (a shape and as many params as it says).
-bool Plausible(const proto::ModelWeights& w) {
-  return w.has_shape() && !w.shape().kind().empty() && w.shape().obs_dim() > 0 &&
-         w.params_size() > 0 && w.params_size() == w.shape().num_params();
-}
-
-}  // namespace
-
-proto::ModelWeights LoadModelFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ConfigError(path + ": cannot open model file");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const std::string bytes = ss.str();
-  if (bytes.empty()) throw ConfigError(path + ": empty model file");
-
-  if (bytes.size() >= 8 && std::memcmp(bytes.data(), kCheckpointMagic, 8) == 0) {
-    if (bytes.size() < kCheckpointHeader) throw ConfigError(path + ": truncated checkpoint header");
-    const uint64_t len = ReadLe<uint64_t>(bytes, 12);
-    const uint32_t crc = ReadLe<uint32_t>(bytes, 20);
-    if (bytes.size() - kCheckpointHeader != len) {
-      throw ConfigError(path + ": checkpoint payload is " +
-                        std::to_string(bytes.size() - kCheckpointHeader) + " bytes, header says " +
-                        std::to_string(len) + " (truncated or corrupt)");
-    }
-    const std::string payload = bytes.substr(kCheckpointHeader);
-    if (Crc32(payload) != crc) throw ConfigError(path + ": checkpoint CRC-32 mismatch (corrupt)");
-    proto::Checkpoint ck;
-    if (!ck.ParseFromString(payload))
-      throw ConfigError(path + ": checkpoint payload does not parse");
-    if (!ck.has_trainer() || !Plausible(ck.trainer().model())) {
-      throw ConfigError(path + ": checkpoint holds no usable trainer.model");
-    }
-    return ck.trainer().model();
-  }
-  // Protobuf parsing is lenient, so accept a message only when it is self-consistent.
-  proto::LearnerState state;
-  if (state.ParseFromString(bytes) && state.has_model() && Plausible(state.model())) {
-    return state.model();
-  }
-  proto::ModelWeights w;
-  if (w.ParseFromString(bytes) && Plausible(w)) return w;
-  throw ConfigError(path +
-                    ": not a perch.proto.ModelWeights, LearnerState or PERCHCKP checkpoint (" +
-                    std::to_string(bytes.size()) + " bytes; corrupt or another format)");
-}
+namespace {}  // namespace
 
 Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& weights,
                   const WalkEvalOptions& o, WalkEvalRecording* rec) {

@@ -11,15 +11,12 @@
 #include "common/proto/model.pb.h"
 #include "learner/policy.h"
 #include "tasks/foot_sliding.h"
+#include "tasks/model_source.h"
 #include "tasks/task_env.h"
 #include "viz/filmstrip.h"
 
 namespace perch {
 
-// Reads a policy file: a serialized perch.proto.ModelWeights, a LearnerState (its model), or a
-// cluster checkpoint ("PERCHCKP" frame around perch.proto.Checkpoint, learner/service/checkpoint.h:
-// its trainer.model). ConfigError naming the file on anything else (corrupt, truncated, empty).
-proto::ModelWeights LoadModelFile(const std::string& path);
 
 struct WalkEvalOptions {
   int episodes = 10;

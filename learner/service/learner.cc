@@ -134,6 +134,7 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
     : setup_(setup),
       options_(options),
       task_(TaskFromName(setup.cluster.task, "cluster.task")),
+      frozen_(setup.frozen),
       store_(options.run_dir, setup.cluster.keep_last, setup.cluster.milestone_every),
       rng_(setup.seed),
       rollout_sock_(ctx, zmq::socket_type::pull),
@@ -144,6 +145,7 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
   limits_.max_abs_value = setup.cluster.max_wire_value;
   limits_.obs_dim = setup.policy.obs_dim;
   limits_.act_dim = setup.policy.action_size();
+  if (setup.policy.kind == PolicyKind::kMeta) limits_.num_choices = setup.policy.num_choices;
   ppo_ = std::make_unique<PpoLearner>(setup.policy, setup.ppo, setup.seed);
   const int learners = setup.cluster.learners;
   if (options_.group_rank < 0 || options_.group_rank >= learners) {
@@ -293,6 +295,23 @@ void LearnerService::Resume() {
   }
   counters_ = ckpt.counters();
   run_id_ = ckpt.run_id();
+  // The run goes on with the subtasks it trained with, whatever the files hold now.
+  std::vector<proto::TaskPolicy> kept;
+  for (const proto::TaskPolicy& p : ckpt.weights().policies()) {
+    if (p.frozen()) kept.push_back(p);
+  }
+  if (!kept.empty()) {
+    for (const proto::TaskPolicy& p : kept) {
+      for (const proto::TaskPolicy& f : frozen_) {
+        if (f.task() == p.task() && f.source() != p.source()) {
+          spdlog::warn(
+              "learner: resumed run keeps its frozen {} policy {} (the config now names {})",
+              TaskName(p.task()), p.source(), f.source());
+        }
+      }
+    }
+    frozen_ = kept;
+  }
   if (ckpt.rng().s_size() == 4) {
     Rng::State st{{ckpt.rng().s(0), ckpt.rng().s(1), ckpt.rng().s(2), ckpt.rng().s(3)},
                   ckpt.rng().has_spare(),
@@ -315,6 +334,7 @@ void CheckRunTimeConfig(const LearnerSetup& setup) {
   proto::LearnerMessage m;
   m.set_wire_version(proto::WIRE_VERSION_CURRENT);
   ppo.ExportWeights(m.mutable_weights()->add_policies()->mutable_model());
+  for (const proto::TaskPolicy& f : setup.frozen) *m.mutable_weights()->add_policies() = f;
   const size_t weights = m.ByteSizeLong() + 256;  // + version, credit, run id
   const size_t per_step = 4 * (2 * static_cast<size_t>(setup.policy.obs_dim) +
                                static_cast<size_t>(setup.policy.action_size()) + 8);
@@ -355,6 +375,13 @@ void ApplyInitFrom(const LearnerSetup& setup, PpoLearner* ppo) {
                  ctx, w.shape().obs_dim(), mine.obs_dim);
     w = DropTrailingInputs(w, mine.obs_dim, ctx);
   }
+  // The walk-only meta pre-training starts the full meta controller (notes 6).
+  if (w.shape().kind() == "meta" && mine.kind == PolicyKind::kMeta &&
+      w.shape().num_choices() < mine.num_choices) {
+    spdlog::info("learner: {}: its {} switch classes widened to {} (the switch head starts anew)",
+                 ctx, w.shape().num_choices(), mine.num_choices);
+    w = WidenMetaChoices(w, mine, setup.seed, ctx);
+  }
   // A run that freezes or frees sigma takes the source's policy with its own std mode.
   if (w.shape().std_mode() != StdModeName(mine.std_mode)) {
     w = ConvertStdMode(w, mine, ctx);
@@ -386,6 +413,7 @@ std::string LearnerService::SaveCheckpoint() {
   proto::TaskPolicy* tp = c.mutable_weights()->add_policies();
   tp->set_task(task_);
   ppo_->ExportWeights(tp->mutable_model());
+  for (const proto::TaskPolicy& f : frozen_) *c.mutable_weights()->add_policies() = f;
   c.mutable_weights()->set_version(version());
   c.mutable_weights()->set_run_id(run_id_);
   ppo_->ExportState(c.mutable_trainer());
@@ -412,6 +440,9 @@ std::string LearnerService::SaveCheckpoint() {
 }
 
 void LearnerService::Publish(bool republish) {
+  // Frozen policies go once to everyone, then to each (re)subscription: new actors need them,
+  // the others keep what they have.
+  const bool with_frozen = !frozen_.empty() && (republish || !frozen_published_);
   if (!republish || weights_bytes_.empty()) {
     proto::LearnerMessage m;
     m.set_wire_version(proto::WIRE_VERSION_CURRENT);
@@ -425,7 +456,15 @@ void LearnerService::Publish(bool republish) {
     ppo_->ExportWeights(tp->mutable_model());
     weights_bytes_ = m.SerializeAsString();
   }
-  weights_sock_.send(zmq::buffer(weights_bytes_), zmq::send_flags::dontwait);
+  if (with_frozen) {
+    proto::LearnerMessage m;
+    m.ParseFromString(weights_bytes_);
+    for (const proto::TaskPolicy& f : frozen_) *m.mutable_weights()->add_policies() = f;
+    weights_sock_.send(zmq::buffer(m.SerializeAsString()), zmq::send_flags::dontwait);
+    frozen_published_ = true;
+  } else {
+    weights_sock_.send(zmq::buffer(weights_bytes_), zmq::send_flags::dontwait);
+  }
   (republish ? stats_.weights_republished : stats_.weights_published) += 1;
 }
 

@@ -37,6 +37,10 @@ struct LearnerSetup {
   Json resolved_config;     // the whole experiment config, saved into the run dir and checkpoints
   std::string compat_key;   // must match a checkpoint to resume from it
   double control_dt = 0.0;  // [s] per env step, for the console (0: lengths in steps)
+  // Policies the env runs frozen inside its step (meta: the subtasks), frozen = true. Shipped
+  // with the first weights and to every (re)subscribing actor; kept in checkpoints, and a
+  // resumed run keeps the checkpoint's.
+  std::vector<proto::TaskPolicy> frozen;
 };
 
 struct LearnerOptions {
@@ -127,6 +131,8 @@ class LearnerService {
   LearnerSetup setup_;
   LearnerOptions options_;
   proto::Task task_;
+  std::vector<proto::TaskPolicy> frozen_;  // setup.frozen, or the resumed checkpoint's
+  bool frozen_published_ = false;
   WireLimits limits_;
   std::unique_ptr<PpoLearner> ppo_;
   CheckpointStore store_;

@@ -6,9 +6,12 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <mutex>
 #include <cmath>
+#include <mutex>
 #include <utility>
+
+#include "common/json_util.h"
+#include "learner/service/cluster_config.h"
 
 namespace perch {
 namespace {
@@ -141,13 +144,46 @@ WireReject ValidateSegment(const proto::Segment& seg, const WireLimits& lim, std
     if (i >= 0) return range(std::string(name) + "[" + std::to_string(i) + "] above max_abs_value");
   }
   if (std::abs(seg.bootstrap_value()) > b) return range("bootstrap_value above max_abs_value");
+  if (lim.num_choices > 0) {
+    const int a = s.action_size();
+    for (int i = 0; i < s.actions_size(); i += a) {
+      const float c = s.actions(i);
+      if (c < 0 || c > lim.num_choices - 1 || c != std::round(c)) {
+        return range("actions[" + std::to_string(i) + "]: meta switch class " + std::to_string(c) +
+                     " is not an integer in [0, " + std::to_string(lim.num_choices) + ")");
+      }
+    }
+  }
   for (const proto::EpisodeStats& e : seg.episodes()) {
-    if (!std::isfinite(e.episode_return())) return *why = "NaN episode_return", WireReject::kNonFinite;
-    if (std::abs(e.episode_return()) > b * std::max<double>(1, e.length()) || e.length() > (1u << 30)) {
+    if (!std::isfinite(e.episode_return()))
+      return *why = "NaN episode_return", WireReject::kNonFinite;
+    if (std::abs(e.episode_return()) > b * std::max<double>(1, e.length()) ||
+        e.length() > (1u << 30)) {
       return range("episode stats out of range");
     }
   }
   return WireReject::kOk;
+}
+
+proto::TaskPolicy FrozenPolicyToProto(const FrozenPolicyData& p) {
+  proto::TaskPolicy t;
+  t.set_task(TaskFromName(p.name, "frozen policy " + p.source));
+  if (!t.mutable_model()->ParseFromString(p.model)) {
+    throw ConfigError("frozen " + p.name + " policy " + p.source + ": model does not parse");
+  }
+  t.set_frozen(true);
+  t.set_saved_config_json(p.saved_config);
+  t.set_source(p.source);
+  return t;
+}
+
+FrozenPolicyData FrozenPolicyFromProto(const proto::TaskPolicy& t) {
+  FrozenPolicyData p;
+  p.name = TaskName(t.task());
+  p.model = t.model().SerializeAsString();
+  p.saved_config = t.saved_config_json();
+  p.source = t.source();
+  return p;
 }
 
 WireReject ParseActorMessage(const void* data, size_t size, const WireLimits& lim,

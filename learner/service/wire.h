@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <string>
 
+#include "common/env.h"
 #include "common/proto/wire.pb.h"
 
 namespace perch {
@@ -17,6 +18,9 @@ struct WireLimits {
   int obs_dim = 0;  // expected; 0 accepts any
   int act_dim = 0;  // action_size
   int max_pose_dim = 4096;
+  // Meta policies: the first action number is a switch class, an integer in [0, num_choices)
+  // (anything else would index past the logits in the PPO update). 0: not a meta policy.
+  int num_choices = 0;
   // |x| above this in any number of a segment is rejected before it touches learner state (a
   // finite 1e30 would otherwise overflow the normaliser or the weights; issue 17).
   double max_abs_value = 1e6;
@@ -25,6 +29,11 @@ struct WireLimits {
 // Why a message was rejected; kOk when accepted. Counted per kind in the learner's metrics.
 enum class WireReject { kOk, kTooBig, kParse, kVersion, kEmpty, kShape, kNonFinite, kRange };
 const char* WireRejectName(WireReject r);
+
+// Frozen policies (common/env.h) on the wire: a TaskPolicy with frozen = true. ConfigError for
+// an unknown subtask name or a model that does not parse.
+proto::TaskPolicy FrozenPolicyToProto(const FrozenPolicyData& p);
+FrozenPolicyData FrozenPolicyFromProto(const proto::TaskPolicy& p);
 
 // Parses and validates an actor -> learner message.
 WireReject ParseActorMessage(const void* data, size_t size, const WireLimits& limits,

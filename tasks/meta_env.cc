@@ -1,0 +1,192 @@
+#include "tasks/meta_env.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "common/paths.h"
+#include "common/proto/model.pb.h"
+#include "tasks/imitation.h"
+#include "tasks/model_source.h"
+
+namespace perch {
+
+namespace {
+
+constexpr uint64_t kSubtaskRngSalt = 0x6A09E667F3BCC909ULL;
+
+float FiniteOr0(float x) { return std::isfinite(x) ? x : 0.0f; }
+
+}  // namespace
+
+MetaEnv::MetaEnv(const TaskEnvConfig& config) : config_(config) {
+  if (config.env.task != "sit_chair") {
+    throw ConfigError("meta env: needs env.task \"sit_chair\", got \"" + config.env.task + "\"");
+  }
+  task_config_ = config.Section<SitChairTaskConfig>();
+  meta_ = task_config_.meta;
+  choice_ids_ = meta_.choice_ids();
+  env_ = MakeTaskHumanoidEnv(config);
+  task_ = const_cast<SitChairTask*>(dynamic_cast<const SitChairTask*>(&env_->task()));
+  if (task_ == nullptr) throw std::logic_error("meta env: the sit_chair env has another task");
+  const EnvSpec& inner = env_->spec();
+  const int obs_dim = ObsLayoutDim(ObsLayout::kProprioChair);  // the meta observes the sit state
+  spec_.name = "meta_sit_chair";
+  spec_.obs_dim = obs_dim;
+  spec_.act_dim = 3;  // [switch class, theta, dist]
+  const float clip = static_cast<float>(config.env.obs.clip);
+  spec_.obs_low.assign(obs_dim, -clip);
+  spec_.obs_high.assign(obs_dim, clip);
+  const float classes = static_cast<float>(choice_ids_.size() - 1);
+  // The target is unbounded in the authors' env; these bounds only document it.
+  spec_.act_low = {0.0f, -1e6f, -1e6f};
+  spec_.act_high = {classes, 1e6f, 1e6f};
+  spec_.obs_slices = {{"more", 0, 6}, {"joints", 6, 42}, {"feet", 48, 2}, {"chair", 50, 7}};
+  spec_.control_dt = inner.control_dt * meta_.period;
+  spec_.max_episode_steps = (inner.max_episode_steps + meta_.period - 1) / meta_.period;
+  spec_.has_success = true;
+  success_steps_ =
+      static_cast<int>(std::ceil(task_config_.success_contact_s / inner.control_dt - 1e-9));
+  inner_obs_.resize(inner.obs_dim);
+  action_.resize(inner.act_dim);
+}
+
+MetaEnv::~MetaEnv() = default;
+
+void MetaEnv::Seed(uint64_t seed) {
+  env_->Seed(seed);
+  rng_.Seed(seed ^ kSubtaskRngSalt);
+}
+
+std::vector<std::string> MetaEnv::frozen_policy_names() const {
+  std::vector<std::string> names;
+  for (int id : choice_ids_) names.push_back(SubtaskName(id));
+  return names;
+}
+
+void MetaEnv::SetFrozenPolicies(const std::vector<FrozenPolicyData>& policies) {
+  std::array<proto::ModelWeights, kNumSubtasks> models;
+  std::array<std::string, kNumSubtasks> names;
+  std::array<Json, kNumSubtasks> saved;
+  std::array<bool, kNumSubtasks> needed{};
+  for (int id : choice_ids_) needed[id] = true;
+  std::array<bool, kNumSubtasks> have{};
+  for (const FrozenPolicyData& p : policies) {
+    const int id = SubtaskIdOf(p.name);
+    if (id < 0 || !needed[id]) continue;  // a subtask this env does not choose
+    const std::string ctx = "frozen " + p.name + " policy " + p.source;
+    if (!models[id].ParseFromString(p.model)) throw ConfigError(ctx + ": model does not parse");
+    names[id] = p.source.empty() ? p.name : p.source;
+    if (!p.saved_config.empty()) {
+      try {
+        saved[id] = Json::parse(p.saved_config);
+      } catch (const std::exception& e) {
+        throw ConfigError(ctx + ": saved config does not parse: " + e.what());
+      }
+    }
+    have[id] = true;
+  }
+  for (int id : choice_ids_) {
+    if (!have[id]) {
+      throw ConfigError(std::string("meta env: no frozen policy for the ") + SubtaskName(id) +
+                        " subtask (sit_chair.meta.choices names it)");
+    }
+  }
+  policies_ = std::make_unique<SubtaskPolicies>(models, names, saved, needed);
+}
+
+void MetaEnv::Reset(float* obs) {
+  env_->Reset(inner_obs_.data());  // SitChairTask: walk active, target = the chair's origin
+  active_ = kWalk;
+  begun_ = false;
+  contact_run_ = 0;
+  prev_dist_ = env_->PelvisSeatDistance();
+  episode_ = MetaEpisode();
+  episode_.min_dist_m = prev_dist_;
+  episode_.spawn_theta = task_->spawn_theta();
+  env_->WriteObservation(ObsLayout::kProprioChair, obs);
+}
+
+StepResult MetaEnv::Step(const float* action, float* obs) {
+  if (policies_ == nullptr) {
+    throw std::logic_error("meta env: Step before the frozen subtask policies were set");
+  }
+  // Absurd or non-finite actions cannot stop the env: the class is clamped, NaN reads as 0.
+  const float a0 = FiniteOr0(action[0]);
+  const int cls = std::clamp(static_cast<int>(std::lround(std::clamp(a0, -1e6f, 1e6f))), 0,
+                             static_cast<int>(choice_ids_.size()) - 1);
+  const int sub = choice_ids_[cls];
+  // The walk target, whatever was chosen (only walk reads it): dist along the heading turned by
+  // theta, from the torso (notes 4.7).
+  const double theta = FiniteOr0(action[1]);
+  const double dist = FiniteOr0(action[2]);
+  const double yaw = env_->RootRpy().z() + theta;
+  const Eigen::Vector3d root = env_->humanoid_state().root_pos;
+  env_->SetWalkTarget(
+      Eigen::Vector2d(root.x() + dist * std::cos(yaw), root.y() + dist * std::sin(yaw)));
+  const double dt = env_->spec().control_dt;
+  StepResult out;
+  bool term = false, trunc = false;
+  for (int k = 0; k < meta_.period && !term && !trunc; ++k) {
+    if (!begun_ || sub != active_) {
+      // A subtask (re)starts: a turn's reference clock begins now.
+      policies_->Begin(sub, *env_);
+      active_ = sub;
+      begun_ = true;
+      episode_.sequence.push_back(sub);
+    }
+    task_->set_active(sub);
+    policies_->Act(sub, *env_, rng_, !meta_.subtask_stochastic, action_.data());
+    const StepResult r = env_->Step(action_.data(), inner_obs_.data());
+    ++episode_.control_steps;
+    episode_.min_dist_m = std::min(episode_.min_dist_m, env_->PelvisSeatDistance());
+    contact_run_ = env_->PelvisSeatContact() ? contact_run_ + 1 : 0;
+    if (episode_.success_step < 0 && contact_run_ >= success_steps_) {
+      episode_.success_step = episode_.control_steps;
+      const Eigen::Vector3d d = env_->PelvisPosition() - env_->SeatTargetWorld();
+      episode_.seated_pos_err_m = d.head<2>().norm();
+      episode_.seated_yaw_err_rad =
+          std::abs(AngleDiff(env_->RootRpy().z(), config_.env.chair_placement.yaw));
+      out.success = true;
+    }
+    if (on_control_step) on_control_step(*env_, r, sub);
+    term = r.terminated || r.invalid;
+    trunc = !term && r.truncated;
+    out.invalid = out.invalid || r.invalid;
+  }
+  // Eq. 8 per meta step (notes 4.7): on support at the step's end, else the approach speed
+  // toward the seat averaged over the meta step.
+  const double d = env_->PelvisSeatDistance();
+  if (env_->PelvisSeatContact()) {
+    out.reward = static_cast<float>(task_config_.support_reward);
+  } else {
+    out.reward = static_cast<float>(
+        ApproachReward(prev_dist_, d, dt * meta_.period, task_config_.approach_weight));
+  }
+  prev_dist_ = d;
+  out.terminated = term;
+  out.truncated = trunc;
+  episode_.fell = term;
+  env_->WriteObservation(ObsLayout::kProprioChair, obs);
+  return out;
+}
+
+std::vector<FrozenPolicyData> LoadFrozenPolicies(const TaskEnvConfig& config) {
+  const MetaConfig& m = config.Section<SitChairTaskConfig>().meta;
+  std::vector<FrozenPolicyData> out;
+  for (int id : m.choice_ids()) {
+    const std::string path = ResolveProjectPath(m.subtasks[id]);
+    try {
+      out.push_back(LoadFrozenPolicy(SubtaskName(id), path));
+    } catch (const ConfigError& e) {
+      throw ConfigError(std::string("sit_chair.meta.subtasks.") + SubtaskName(id) + ": " +
+                        e.what());
+    }
+  }
+  // Each must observe its layout: building the runners says which does not.
+  MetaEnv probe(config);
+  probe.SetFrozenPolicies(out);
+  return out;
+}
+
+}  // namespace perch

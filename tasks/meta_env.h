@@ -1,0 +1,87 @@
+// The hierarchy as an env (paper Sec. 5; notes 4.7): one Step() of MetaEnv is one meta decision.
+// The action is the hybrid meta action [switch class, theta rad, dist m]; the env sets the walk
+// target, then runs `meta.period` control steps (60 Hz) of the chosen frozen subtask policy on
+// the sit_chair humanoid env (240 Hz physics inside), and returns the meta reward (Eq. 8) of that
+// meta step. The actor loop sees a plain Env: it knows nothing about subtasks or humanoids.
+//
+// The frozen subtask policies arrive through FrozenPolicyEnv: the learner ships them with the
+// weights (actors on a cluster read no files); local tools load them from the files the config
+// names (LoadFrozenPolicies).
+#pragma once
+
+#include <array>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/env.h"
+#include "common/rng.h"
+#include "envs/humanoid_env.h"
+#include "tasks/hierarchy.h"
+#include "tasks/task_env.h"
+
+namespace perch {
+
+// What happened in the current (or last) episode, for evaluation.
+struct MetaEpisode {
+  std::vector<int> sequence;  // SubtaskId of each run of one subtask, in order
+  double min_dist_m = 0.0;    // minimum pelvis - seat target distance [m]
+  int success_step = -1;      // control step at which 3 s of seated contact completed
+  bool fell = false;          // early termination
+  int control_steps = 0;
+  double spawn_theta = 0.0;  // azimuth of the spawn around the zone centre [rad]
+  // At success: pelvis horizontal distance to the seat target [m] and root yaw error to the
+  // chair's facing direction [rad].
+  double seated_pos_err_m = 0.0;
+  double seated_yaw_err_rad = 0.0;
+};
+
+class MetaEnv : public Env, public FrozenPolicyEnv {
+ public:
+  // config.env.task must be sit_chair; its section's `meta` says which subtasks run.
+  explicit MetaEnv(const TaskEnvConfig& config);
+  ~MetaEnv() override;
+
+  const EnvSpec& spec() const override { return spec_; }
+  void Seed(uint64_t seed) override;
+  void Reset(float* obs) override;
+  StepResult Step(const float* action, float* obs) override;
+
+  std::vector<std::string> frozen_policy_names() const override;
+  bool has_frozen_policies() const override { return policies_ != nullptr; }
+  void SetFrozenPolicies(const std::vector<FrozenPolicyData>& policies) override;
+
+  const HumanoidChairEnv& humanoid() const { return *env_; }
+  const MetaConfig& meta() const { return meta_; }
+  const MetaEpisode& episode() const { return episode_; }
+  int active() const { return active_; }  // SubtaskId acting now
+  // Called after every control step (recordings, filmstrips): the env, its step result and the
+  // acting subtask.
+  std::function<void(const HumanoidChairEnv&, const StepResult&, int active)> on_control_step;
+
+ private:
+  TaskEnvConfig config_;
+  SitChairTaskConfig task_config_;
+  MetaConfig meta_;
+  std::vector<int> choice_ids_;  // SubtaskId per switch class
+  std::unique_ptr<HumanoidChairEnv> env_;
+  SitChairTask* task_ = nullptr;  // owned by env_
+  std::unique_ptr<SubtaskPolicies> policies_;
+  EnvSpec spec_;
+  Rng rng_;  // the subtasks' action noise
+  std::vector<float> inner_obs_, action_;
+  int active_ = kWalk;
+  bool begun_ = false;
+  int contact_run_ = 0;     // control steps of continuous seated contact
+  int success_steps_ = 0;   // ... needed for success
+  double prev_dist_ = 0.0;  // pelvis - seat distance at the previous meta-step end [m]
+  MetaEpisode episode_;
+};
+
+// The frozen subtask policies the config's sit_chair.meta names (only the chosen ones), read
+// from their files and checked against the layouts they must observe (ConfigError naming the
+// subtask and the file otherwise).
+std::vector<FrozenPolicyData> LoadFrozenPolicies(const TaskEnvConfig& config);
+
+}  // namespace perch

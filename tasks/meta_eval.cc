@@ -1,0 +1,214 @@
+#include "tasks/meta_eval.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <map>
+#include <mutex>
+#include <thread>
+
+#include "learner/policy.h"
+#include "tasks/meta_env.h"
+#include "tasks/task_eval.h"
+
+namespace perch {
+
+namespace {
+
+struct TrialResult {
+  bool success = false;
+  bool fell = false;
+  double min_dist_m = 0.0;
+  double time_to_sit_s = 0.0;
+  double pos_err_m = 0.0, yaw_err_rad = 0.0;
+  double spawn_theta = 0.0;
+  std::vector<int> sequence;
+};
+
+uint64_t TrialSeed(uint64_t seed, int trial) {
+  return seed * 1000003ULL + static_cast<uint64_t>(trial);
+}
+
+// One trial on `env` with `runner` (both owned by the calling thread).
+TrialResult RunTrial(MetaEnv& env, PolicyRunner& runner, const MetaEvalOptions& o, int trial,
+                     std::vector<PoseFrame>* frames) {
+  const uint64_t s = TrialSeed(o.seed, trial);
+  env.Seed(2 * s);
+  Rng act_rng(2 * s + 1);
+  std::vector<float> obs(env.spec().obs_dim), action(env.spec().act_dim);
+  const double dt = env.humanoid().spec().control_dt;
+  if (frames != nullptr) {
+    env.on_control_step = [&](const HumanoidChairEnv& h, const StepResult&, int active) {
+      const HumanoidState& st = h.humanoid_state();
+      PoseFrame f;
+      f.root_pos = st.root_pos;
+      f.root_quat = st.root_quat;
+      f.q.assign(st.q.begin(), st.q.end());
+      f.time_s = h.episode_step() * dt;
+      f.label = SubtaskName(active);
+      frames->push_back(f);
+    };
+  }
+  env.Reset(obs.data());
+  for (int t = 0; t < env.spec().max_episode_steps; ++t) {
+    runner.Act(obs.data(), act_rng, !o.stochastic, nullptr, action.data());
+    const StepResult r = env.Step(action.data(), obs.data());
+    if (r.terminated || r.truncated) break;
+  }
+  env.on_control_step = nullptr;
+  const MetaEpisode& e = env.episode();
+  TrialResult out;
+  out.success = e.success_step >= 0;
+  out.fell = e.fell;
+  out.min_dist_m = e.min_dist_m;
+  out.time_to_sit_s = out.success ? e.success_step * dt : 0.0;
+  out.pos_err_m = e.seated_pos_err_m;
+  out.yaw_err_rad = e.seated_yaw_err_rad;
+  out.spawn_theta = e.spawn_theta;
+  out.sequence = e.sequence;
+  return out;
+}
+
+double Mean(const std::vector<double>& v) {
+  double m = 0.0;
+  for (double x : v) m += x / std::max<size_t>(1, v.size());
+  return m;
+}
+
+}  // namespace
+
+Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& meta,
+                  const std::vector<FrozenPolicyData>& frozen, const MetaEvalOptions& o,
+                  MetaTrialFrames* first_success, MetaTrialFrames* first_failure) {
+  if (o.trials < 1) throw ConfigError("eval: --trials must be >= 1");
+  TaskEnvConfig config = config_in;
+  config.MutableSection<SitChairTaskConfig>().meta.subtask_stochastic = o.stochastic;
+  const PolicyConfig pc = PolicyConfigFromShape(meta.shape(), "meta model");
+  const MetaConfig& mc = config.Section<SitChairTaskConfig>().meta;
+  if (pc.kind != PolicyKind::kMeta || pc.obs_dim != 57 ||
+      pc.num_choices != static_cast<int>(mc.choices.size())) {
+    throw ConfigError("eval: the model is not a meta policy over this config's " +
+                      std::to_string(mc.choices.size()) + " subtask choices (kind " +
+                      meta.shape().kind() + ", " + std::to_string(pc.num_choices) + " classes)");
+  }
+  const int threads = std::clamp(o.threads, 1, o.trials);
+  std::vector<TrialResult> results(o.trials);
+  std::atomic<int> next{0}, done{0}, successes{0};
+  std::mutex progress_mu;
+  std::exception_ptr error;
+  auto worker = [&]() {
+    try {
+      MetaEnv env(config);
+      env.SetFrozenPolicies(frozen);
+      PolicyRunner runner(pc, NormalizerConfig());
+      runner.LoadWeights(meta);
+      runner.set_update_obs_stats(false);
+      for (int i = next++; i < o.trials; i = next++) {
+        results[i] = RunTrial(env, runner, o, i, nullptr);
+        successes += results[i].success;
+        const int d = ++done;
+        if (o.progress) {
+          std::lock_guard<std::mutex> lock(progress_mu);
+          o.progress(d, successes.load());
+        }
+      }
+    } catch (...) {
+      std::lock_guard<std::mutex> lock(progress_mu);
+      if (!error) error = std::current_exception();
+      next = o.trials;  // the others stop too
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int t = 0; t < threads; ++t) pool.emplace_back(worker);
+  for (std::thread& t : pool) t.join();
+  if (error) std::rethrow_exception(error);
+
+  // Aggregates, in trial order (independent of the threads).
+  int n_success = 0, n_fell = 0;
+  std::vector<double> min_d, t_sit, pos_cm, yaw_deg;
+  // Transition counts per start side (the chair faces +x: theta > 0 is its left, +y).
+  std::map<std::string, std::map<std::string, std::map<std::string, int>>> trans;
+  std::map<std::string, int> seq_count;
+  std::map<std::string, std::array<int, 2>> side_success;  // side -> {successes, trials}
+  for (const TrialResult& r : results) {
+    n_success += r.success;
+    n_fell += r.fell;
+    min_d.push_back(r.min_dist_m);
+    if (r.success) {
+      t_sit.push_back(r.time_to_sit_s);
+      pos_cm.push_back(100.0 * r.pos_err_m);
+      yaw_deg.push_back(r.yaw_err_rad * 180.0 / M_PI);
+    }
+    const std::string side = r.spawn_theta >= 0 ? "left" : "right";
+    side_success[side][0] += r.success;
+    side_success[side][1] += 1;
+    std::string prev = "start", seq;
+    for (int id : r.sequence) {
+      trans[side][prev][SubtaskName(id)] += 1;
+      prev = SubtaskName(id);
+      seq += (seq.empty() ? "" : ">") + prev;
+    }
+    trans[side][prev]["end"] += 1;
+    seq_count[seq] += 1;
+  }
+  const double n = o.trials;
+  const double mean = Mean(min_d);
+  double var = 0.0;
+  for (double d : min_d) var += (d - mean) * (d - mean) / n;
+  const auto ci = WilsonInterval95(n_success, o.trials);
+  std::vector<std::pair<int, std::string>> seqs;
+  for (const auto& [s, c] : seq_count) seqs.push_back({c, s});
+  std::sort(seqs.begin(), seqs.end(), [](const auto& a, const auto& b) {
+    return a.first != b.first ? a.first > b.first : a.second < b.second;
+  });
+  Json top = Json::array();
+  for (size_t i = 0; i < seqs.size() && i < 10; ++i) {
+    top.push_back({{"sequence", seqs[i].second}, {"trials", seqs[i].first}});
+  }
+  Json sides = Json::object();
+  for (const auto& [side, c] : side_success) {
+    sides[side] = {{"trials", c[1]}, {"success_rate", c[1] ? double(c[0]) / c[1] : 0.0}};
+  }
+  Json j{{"task", "sit_chair"},
+         {"zone", config.env.spawn.zone},
+         {"chair", config.env.chair},
+         {"trials", o.trials},
+         {"seed", o.seed},
+         {"stochastic", o.stochastic},
+         {"threads", threads},
+         {"success_rate", n_success / n},
+         {"success_ci95", {ci[0], ci[1]}},
+         {"min_dist_mean_m", mean},
+         {"min_dist_std_m", std::sqrt(var)},
+         {"fall_rate", n_fell / n},
+         {"seated_position_error_cm_mean", Mean(pos_cm)},
+         {"seated_orientation_error_deg_mean", Mean(yaw_deg)},
+         {"time_to_sit_s_mean", Mean(t_sit)},
+         {"by_side", sides},
+         {"transitions", trans},
+         {"sequences", top},
+         {"choices", config.Section<SitChairTaskConfig>().meta.choices}};
+
+  // Filmstrip material: the first success and the first failure, replayed (trials are
+  // deterministic for their seed).
+  auto replay = [&](bool want_success, MetaTrialFrames* out) {
+    if (out == nullptr) return;
+    for (int i = 0; i < o.trials; ++i) {
+      if (results[i].success != want_success) continue;
+      MetaEnv env(config);
+      env.SetFrozenPolicies(frozen);
+      PolicyRunner runner(pc, NormalizerConfig());
+      runner.LoadWeights(meta);
+      runner.set_update_obs_stats(false);
+      out->trial = i;
+      out->success = want_success;
+      RunTrial(env, runner, o, i, &out->frames);
+      return;
+    }
+  };
+  replay(true, first_success);
+  replay(false, first_failure);
+  return j;
+}
+
+}  // namespace perch

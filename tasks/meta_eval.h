@@ -1,0 +1,47 @@
+// Evaluation of the meta controller on the main task (paper Sec. 7, Tables 3 and 6, Fig. 7):
+// `perch eval --task sit_chair --zone Z --trials N`. Trials are spread over threads; trial i
+// uses seed (seed, i) whatever the thread count, so the result is deterministic for a seed.
+// Definitions: docs/meta.md.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "common/env.h"
+#include "common/json_util.h"
+#include "common/proto/model.pb.h"
+#include "tasks/task_env.h"
+#include "viz/filmstrip.h"
+
+namespace perch {
+
+struct MetaEvalOptions {
+  int trials = 100;
+  uint64_t seed = 0;
+  // false: the meta's most likely class and mean target, the subtasks' mean actions; true: all
+  // sampled (the authors' released visualisation).
+  bool stochastic = false;
+  int threads = 1;
+  std::function<void(int done, int successes)> progress;  // called from the threads, serialised
+};
+
+// The control-step frames of one trial, labelled with the acting subtask.
+struct MetaTrialFrames {
+  int trial = -1;
+  bool success = false;
+  std::vector<PoseFrame> frames;
+};
+
+// JSON: trials, seed, zone, success_rate, success_ci95, min_dist_mean_m, min_dist_std_m,
+// fall_rate, seated_position_error_cm_mean, seated_orientation_error_deg_mean, time_to_sit_s_mean,
+// transitions (per start side: counts from -> to, with "start" as the first row), sequences (the
+// most frequent subtask sequences). first_success / first_failure (when given) get the frames of
+// the first successful and the first failed trial.
+Json EvaluateMeta(const TaskEnvConfig& config, const proto::ModelWeights& meta,
+                  const std::vector<FrozenPolicyData>& frozen, const MetaEvalOptions& options,
+                  MetaTrialFrames* first_success = nullptr,
+                  MetaTrialFrames* first_failure = nullptr);
+
+}  // namespace perch

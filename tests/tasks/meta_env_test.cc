@@ -1,0 +1,205 @@
+#include "tasks/meta_env.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "common/paths.h"
+#include "learner/ppo.h"
+#include "tasks/model_source.h"
+
+namespace perch {
+namespace {
+
+TaskEnvConfig MetaConfigFor(const std::vector<std::string>& choices, int zone = 1,
+                            double radius = 1.5) {
+  Json env{{"task", "sit_chair"},
+           {"spawn", {{"zone", zone}, {"radius", radius}}},
+           {"sit_chair", {{"meta", {{"choices", choices}}}}}};
+  return TaskEnvConfig::FromJson(env, "t");
+}
+
+// Untrained frozen policies of the right layouts (fast, deterministic; the real ones are tested
+// below where they matter).
+std::vector<FrozenPolicyData> Untrained() {
+  std::vector<FrozenPolicyData> out;
+  for (int id = 0; id < kNumSubtasks; ++id) {
+    PpoLearner l(PolicyConfig::Subtask(id == kWalk  ? 52
+                                       : id == kSit ? 57
+                                                    : 50),
+                 PpoConfig::Subtask(), id + 1);
+    proto::ModelWeights w;
+    l.ExportWeights(&w);
+    out.push_back({SubtaskName(id), w.SerializeAsString(), "", "untrained"});
+  }
+  return out;
+}
+
+TEST(MetaEnv, SpecIsTheMetaDecision) {
+  MetaEnv env(MetaConfigFor({"turn_left", "turn_right", "sit", "walk"}));
+  EXPECT_EQ(env.spec().obs_dim, 57);
+  EXPECT_EQ(env.spec().act_dim, 3);
+  EXPECT_TRUE(env.spec().has_success);
+  // 990 control steps of 30: 33 meta steps of 0.495 s (notes 4.1, 4.7).
+  EXPECT_EQ(env.spec().max_episode_steps, 33);
+  EXPECT_NEAR(env.spec().control_dt, 30 * env.humanoid().spec().control_dt, 1e-12);
+  EXPECT_EQ(env.frozen_policy_names(),
+            (std::vector<std::string>{"turn_left", "turn_right", "sit", "walk"}));
+  MetaEnv walk_only(MetaConfigFor({"walk"}));
+  EXPECT_EQ(walk_only.frozen_policy_names(), std::vector<std::string>{"walk"});
+}
+
+TEST(MetaEnv, RefusesToStepWithoutSubtasksAndNamesAMissingOne) {
+  MetaEnv env(MetaConfigFor({"turn_left", "sit", "walk"}));
+  std::vector<float> obs(57), a{2, 0, 1};
+  env.Reset(obs.data());
+  EXPECT_THROW(env.Step(a.data(), obs.data()), std::logic_error);
+  std::vector<FrozenPolicyData> p = Untrained();
+  p.erase(p.begin() + kSit);
+  try {
+    env.SetFrozenPolicies(p);
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("sit subtask"), std::string::npos) << e.what();
+  }
+  // A walk model where the sit one belongs: its observation size is refused, naming the file.
+  p = Untrained();
+  p[kSit].model = p[kWalk].model;
+  p[kSit].source = "walk-as-sit.bin";
+  try {
+    env.SetFrozenPolicies(p);
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("walk-as-sit.bin"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("57"), std::string::npos) << e.what();
+  }
+}
+
+TEST(MetaEnv, OneStepRunsThePeriodWithTheChosenSubtaskAndPaysEq8) {
+  MetaEnv env(MetaConfigFor({"turn_left", "turn_right", "sit", "walk"}));
+  env.SetFrozenPolicies(Untrained());
+  int steps = 0, last_active = -1;
+  env.on_control_step = [&](const HumanoidChairEnv&, const StepResult&, int active) {
+    ++steps;
+    last_active = active;
+  };
+  std::vector<float> obs(57);
+  env.Seed(5);
+  env.Reset(obs.data());
+  const double d0 = env.humanoid().PelvisSeatDistance();
+  std::vector<float> a{1.0f, 0.3f, 2.0f};  // class 1 = right turn
+  const StepResult r = env.Step(a.data(), obs.data());
+  if (!r.terminated) EXPECT_EQ(steps, 30);
+  EXPECT_EQ(last_active, kRightTurn);
+  ASSERT_FALSE(env.episode().sequence.empty());
+  EXPECT_EQ(env.episode().sequence[0], kRightTurn);
+  // Not on the seat: 0.5 x the approach speed averaged over the meta step.
+  const double d1 = env.humanoid().PelvisSeatDistance();
+  const double dt = env.spec().control_dt;  // Phi's fixed 30-step scale, even when cut short
+  EXPECT_NEAR(r.reward, 0.5 * (d0 - d1) / dt, 1e-4);
+  // The walk target was set from the torso: dist along the heading turned by theta.
+  // (checked on a fresh episode, before any physics moves the torso)
+  env.Reset(obs.data());
+  const Eigen::Vector3d root = env.humanoid().humanoid_state().root_pos;
+  const double yaw = env.humanoid().RootRpy().z();
+  steps = 0;
+  a = {3.0f, -0.5f, 1.5f};  // walk
+  env.Step(a.data(), obs.data());
+  const Eigen::Vector2d want(root.x() + 1.5 * std::cos(yaw - 0.5),
+                             root.y() + 1.5 * std::sin(yaw - 0.5));
+  EXPECT_NEAR((env.humanoid().walk_target() - want).norm(), 0.0, 1e-9);
+  EXPECT_EQ(env.episode().sequence, std::vector<int>{kWalk});
+}
+
+TEST(MetaEnv, HostileActionsAreClampedNotFatal) {
+  MetaEnv env(MetaConfigFor({"turn_left", "turn_right", "sit", "walk"}));
+  env.SetFrozenPolicies(Untrained());
+  std::vector<float> obs(57);
+  env.Reset(obs.data());
+  const float nan = std::nanf("");
+  for (const std::vector<float>& a : std::vector<std::vector<float>>{
+           {1e30f, nan, 1e30f}, {-7.0f, 1e9f, -1e9f}, {nan, nan, nan}}) {
+    const StepResult r = env.Step(a.data(), obs.data());
+    EXPECT_TRUE(std::isfinite(r.reward));
+    for (float x : obs) EXPECT_TRUE(std::isfinite(x));
+    if (r.terminated || r.truncated) env.Reset(obs.data());
+  }
+}
+
+TEST(MetaEnv, SameSeedSameEpisode) {
+  auto run = [] {
+    MetaEnv env(MetaConfigFor({"turn_left", "turn_right", "sit", "walk"}));
+    env.SetFrozenPolicies(Untrained());
+    env.Seed(11);
+    std::vector<float> obs(57);
+    env.Reset(obs.data());
+    std::vector<float> trace;
+    for (int t = 0; t < 4; ++t) {
+      std::vector<float> a{static_cast<float>(t % 4), 0.1f * t, 1.0f};
+      const StepResult r = env.Step(a.data(), obs.data());
+      trace.push_back(r.reward);
+      trace.insert(trace.end(), obs.begin(), obs.end());
+      if (r.terminated) break;
+    }
+    return trace;
+  };
+  EXPECT_EQ(run(), run());
+}
+
+// The delivered subtasks, loaded from the files the default config names.
+// The delivered subtasks, loaded from the files the default config names.
+TEST(MetaEnv, DISABLED_Diag) {
+  for (int stoch = 0; stoch < 2; ++stoch) {
+    TaskEnvConfig c = MetaConfigFor({"walk"}, 1, 8.0);
+    c.MutableSection<SitChairTaskConfig>().meta.subtask_stochastic = stoch;
+    MetaEnv env(c);
+    env.SetFrozenPolicies(LoadFrozenPolicies(c));
+    int falls = 0;
+    double len = 0;
+    for (int e = 0; e < 50; ++e) {
+      env.Seed(100 + e);
+      std::vector<float> obs(57), a{0.0f, 0.0f, 2.0f};
+      env.Reset(obs.data());
+      for (int t = 0; t < 8; ++t) {
+        const StepResult r = env.Step(a.data(), obs.data());
+        if (r.terminated) {
+          ++falls;
+          break;
+        }
+      }
+      len += env.episode().control_steps;
+    }
+    printf("stochastic %d falls %d/50 mean steps %.0f\n", stoch, falls, len / 50);
+  }
+}
+
+TEST(MetaEnv, LoadsTheConfiguredSubtasksAndTheWalkerWalksToATarget) {
+  // Spawned 8 m from the zone's centre, facing it: 4 s of walking stays clear of the chair.
+  const TaskEnvConfig c = MetaConfigFor({"walk"}, 1, 8.0);
+  const std::vector<FrozenPolicyData> p = LoadFrozenPolicies(c);
+  ASSERT_EQ(p.size(), 1u);
+  EXPECT_EQ(p[0].name, "walk");
+  EXPECT_NE(p[0].source.find("sha256"), std::string::npos);
+  MetaEnv env(c);
+  env.SetFrozenPolicies(p);
+  // Ten episodes walking straight on: the frozen walker must stay up for most of the 4 s, and
+  // come closer to the chair.
+  int falls = 0;
+  for (int e = 0; e < 10; ++e) {
+    env.Seed(100 + e);
+    std::vector<float> obs(57), a{0.0f, 0.0f, 2.0f};
+    env.Reset(obs.data());
+    for (int t = 0; t < 8; ++t) {
+      const StepResult r = env.Step(a.data(), obs.data());
+      if (r.terminated) {
+        ++falls;
+        break;
+      }
+    }
+    if (env.episode().control_steps == 240) EXPECT_LT(env.episode().min_dist_m, 6.0);
+  }
+  EXPECT_LE(falls, 3);
+}
+
+}  // namespace
+}  // namespace perch
