@@ -479,3 +479,45 @@ TEST(InprocTest, AHeartbeatFloodIsBoundedAndForgotten) {
 
 }  // namespace
 }  // namespace perch
+
+namespace perch {
+namespace {
+
+using namespace testing_util;
+
+// The meta controller over the real sit_chair env: the learner reads the frozen walker named in
+// the config and ships it; the actors (which read no model file) can only step, and the learner
+// can only update, once it arrived. The checkpoint keeps it.
+TEST(InprocTest, MetaRunShipsItsFrozenSubtasksAndCheckpointsThem) {
+  Json j = LoadJsonFile(std::string(PERCH_SOURCE_DIR) + "/configs/meta_walk.json");
+  j["ppo"]["steps_per_update"] = 16;
+  j["ppo"]["num_minibatches"] = 2;
+  j["cluster"]["segment_steps"] = 8;
+  j["cluster"]["insecure"] = true;
+  j["cluster"]["checkpoint_every"] = 1;
+  j["cluster"]["heartbeat_s"] = 0.2;
+  std::string run_dir;
+  const InprocRun r = RunInproc("meta", 3, 2, &run_dir, j);
+  EXPECT_EQ(r.learner_updates, 3u);
+  EXPECT_GE(r.actor_segments, 6u);
+  const CheckpointStore store(run_dir, 3, 0);
+  ASSERT_FALSE(store.List().empty());
+  const proto::Checkpoint c = ReadCheckpointFile(store.PathFor(store.List().back()));
+  int frozen = 0;
+  for (const proto::TaskPolicy& p : c.weights().policies()) {
+    if (!p.frozen()) {
+      EXPECT_EQ(p.task(), proto::TASK_META);
+      EXPECT_EQ(p.model().shape().kind(), "meta");
+      continue;
+    }
+    ++frozen;
+    EXPECT_EQ(p.task(), proto::TASK_WALK);
+    EXPECT_NE(p.source().find("walk_stage2_fallrestart"), std::string::npos) << p.source();
+    EXPECT_NE(p.source().find("sha256"), std::string::npos);
+    EXPECT_EQ(p.model().shape().obs_dim(), 52);
+  }
+  EXPECT_EQ(frozen, 1);
+}
+
+}  // namespace
+}  // namespace perch

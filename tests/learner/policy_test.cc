@@ -348,3 +348,46 @@ TEST(DropTrailingInputs, ActsAsTheSourceWithTheDroppedInputsAtTheirMean) {
 
 }  // namespace
 }  // namespace perch
+
+namespace perch {
+namespace {
+
+// The walk-only meta (one switch class) starts the full one (four): same walk target, log-std and
+// value; only the switch head is new.
+TEST(WidenMetaChoices, KeepsTargetHeadAndValueAndStartsTheSwitchAnew) {
+  PolicyConfig one = PolicyConfig::Meta(57);
+  one.num_choices = 1;
+  one.target_choice = 0;
+  PpoLearner learner(one, PpoConfig::Meta(), 3);
+  proto::ModelWeights w;
+  learner.ExportWeights(&w);
+  Rng rng(9);
+  for (int i = 0; i < w.params_size(); ++i) w.set_params(i, static_cast<float>(rng.Normal() * 0.3));
+  const PolicyConfig four = PolicyConfig::Meta(57);
+  const proto::ModelWeights wide = WidenMetaChoices(w, four, 1, "test");
+  EXPECT_EQ(wide.shape().num_choices(), 4);
+  EXPECT_EQ(wide.shape().target_choice(), 3);
+  PolicyRunner a(one, NormalizerConfig()), b(four, NormalizerConfig());
+  a.LoadWeights(w);
+  b.LoadWeights(wide);
+  a.set_update_obs_stats(false);
+  b.set_update_obs_stats(false);
+  for (int trial = 0; trial < 5; ++trial) {
+    std::vector<float> x(57), ua(3), ub(3);
+    for (float& v : x) v = static_cast<float>(rng.Normal());
+    const auto oa = a.Act(x.data(), rng, true, nullptr, ua.data());
+    const auto ob = b.Act(x.data(), rng, true, nullptr, ub.data());
+    EXPECT_NEAR(ua[1], ub[1], 1e-5);  // theta
+    EXPECT_NEAR(ua[2], ub[2], 1e-5);  // dist
+    EXPECT_NEAR(oa.value, ob.value, 1e-5);
+  }
+  // Anything but a meta policy with fewer classes is refused.
+  EXPECT_THROW(WidenMetaChoices(wide, four, 1, "t"), ConfigError);
+  PpoLearner gauss(PolicyConfig::Subtask(57), PpoConfig::Subtask(), 1);
+  proto::ModelWeights g;
+  gauss.ExportWeights(&g);
+  EXPECT_THROW(WidenMetaChoices(g, four, 1, "t"), ConfigError);
+}
+
+}  // namespace
+}  // namespace perch

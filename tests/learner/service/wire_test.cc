@@ -117,6 +117,27 @@ TEST(WireTest, RejectsShapeErrors) {
   }
 }
 
+// A meta segment's first action number indexes the switch's logits in the PPO update: anything
+// but an integer class in range is refused before it gets there.
+TEST(WireTest, RejectsMetaSwitchClassesOutOfRange) {
+  WireLimits l = Limits();
+  l.num_choices = 4;
+  for (const float c : {0.0f, 3.0f, 2.5f, -1.0f, 4.0f, 1e5f}) {
+    proto::ActorMessage m = ValidSegment();
+    auto* r = m.mutable_segment()->mutable_rollout();
+    for (int t = 0; t < kSteps; ++t) r->set_actions(t * kAct, 1.0f);
+    r->set_actions(2 * kAct, c);
+    const std::string bytes = m.SerializeAsString();
+    proto::ActorMessage out;
+    std::string why;
+    const bool ok = c == 0.0f || c == 3.0f;
+    EXPECT_EQ(ParseActorMessage(bytes.data(), bytes.size(), l, &out, &why),
+              ok ? WireReject::kOk : WireReject::kRange)
+        << c << " " << why;
+    if (!ok) EXPECT_NE(why.find("switch class"), std::string::npos) << why;
+  }
+}
+
 TEST(WireTest, RejectsNonFinite) {
   std::string why;
   proto::ActorMessage m = ValidSegment();
