@@ -68,7 +68,7 @@ TEST(ExperimentConfig, ClusterTaskMustNameTheEnvsTaskAndIsDerivedWhenAbsent) {
             "");  // the older spelling of the same task
   const ExperimentConfig c = ExperimentConfigFromJson({{"env", {{"task", "sit"}}}}, "x.json");
   EXPECT_EQ(c.cluster.task, "sit");
-  // The hierarchy has no env yet: refused by field, not left to crash actors.
+  // The meta controller runs over sit_chair only: refused by field, not left to crash actors.
   EXPECT_NE(ExperimentError({{"env", {{"task", "sit"}}}, {"cluster", {{"task", "meta"}}}})
                 .find("x.json.cluster.task"),
             std::string::npos);
@@ -77,6 +77,40 @@ TEST(ExperimentConfig, ClusterTaskMustNameTheEnvsTaskAndIsDerivedWhenAbsent) {
             std::string::npos);
   // The mock backend (transport tests) keeps its meta task.
   EXPECT_EQ(ExperimentError({{"env_backend", "mock"}, {"cluster", {{"task", "meta"}}}}), "");
+}
+
+// Which subtasks a meta run uses is checked when the learner's setup is made (perch train and
+// --check-config do that first): a wrong model for a subtask is named, not a crash loop.
+TEST(ExperimentConfig, MetaSubtasksAreCheckedAtStartUp) {
+  Json j{{"env",
+          {{"task", "sit_chair"},
+           {"sit_chair", {{"meta", {{"choices", {"walk", "sit"}}}}}}}},
+         {"cluster", {{"task", "meta"}}}};
+  ExperimentConfig c = ExperimentConfigFromJson(j, "x.json");
+  const LearnerSetup ok = MakeLearnerSetup(c);
+  EXPECT_EQ(ok.policy.num_choices, 2);
+  EXPECT_EQ(ok.policy.target_choice, 0);
+  EXPECT_EQ(ok.frozen.size(), 2u);
+  j["env"]["sit_chair"]["meta"]["subtasks"] = {{"sit", "models/walk_stage1/policy.bin"}};
+  c = ExperimentConfigFromJson(j, "x.json");
+  try {
+    MakeLearnerSetup(c);
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("sit"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("walk_stage1"), std::string::npos) << e.what();
+  }
+  j["env"]["sit_chair"]["meta"]["subtasks"] = {{"sit", "models/none.bin"}};
+  c = ExperimentConfigFromJson(j, "x.json");
+  EXPECT_THROW(MakeLearnerSetup(c), ConfigError);
+  j["env"]["sit_chair"]["meta"] = {{"choices", {"sit"}}};  // no walk: no target head
+  c = ExperimentConfigFromJson(j, "x.json");
+  try {
+    MakeLearnerSetup(c);
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("meta.choices"), std::string::npos) << e.what();
+  }
 }
 
 TEST(ExperimentConfig, EachSubtaskConfigBuildsItsEnvWithThePapersObservation) {
