@@ -148,31 +148,6 @@ TEST(MetaEnv, SameSeedSameEpisode) {
 
 // The delivered subtasks, loaded from the files the default config names.
 // The delivered subtasks, loaded from the files the default config names.
-TEST(MetaEnv, DISABLED_Diag) {
-  for (int stoch = 0; stoch < 2; ++stoch) {
-    TaskEnvConfig c = MetaConfigFor({"walk"}, 1, 8.0);
-    c.MutableSection<SitChairTaskConfig>().meta.subtask_stochastic = stoch;
-    MetaEnv env(c);
-    env.SetFrozenPolicies(LoadFrozenPolicies(c));
-    int falls = 0;
-    double len = 0;
-    for (int e = 0; e < 50; ++e) {
-      env.Seed(100 + e);
-      std::vector<float> obs(57), a{0.0f, 0.0f, 2.0f};
-      env.Reset(obs.data());
-      for (int t = 0; t < 8; ++t) {
-        const StepResult r = env.Step(a.data(), obs.data());
-        if (r.terminated) {
-          ++falls;
-          break;
-        }
-      }
-      len += env.episode().control_steps;
-    }
-    printf("stochastic %d falls %d/50 mean steps %.0f\n", stoch, falls, len / 50);
-  }
-}
-
 TEST(MetaEnv, LoadsTheConfiguredSubtasksAndTheWalkerWalksToATarget) {
   // Spawned 8 m from the zone's centre, facing it: 4 s of walking stays clear of the chair.
   const TaskEnvConfig c = MetaConfigFor({"walk"}, 1, 8.0);
