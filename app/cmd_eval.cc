@@ -224,6 +224,16 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "chain and sit_chair: spawn zone (1 easy, 2 lateral, 3 rear)")
       ->capture_default_str()
       ->check(CLI::Range(1, 3));
+  cmd->add_option("--chain-approach-m", chain->options.approach_dist_m,
+                  "chain: the walk target's distance in front of the seat [m]")
+      ->capture_default_str();
+  cmd->add_option("--chain-reach-m", chain->options.reach_m,
+                  "chain: walk -> turn when this close to the walk target [m]")
+      ->capture_default_str()
+      ->check(CLI::Range(0.01, 5.0));
+  cmd->add_option("--chain-turn-s", chain->options.turn_s, "chain: turn -> sit after this long [s]")
+      ->capture_default_str()
+      ->check(CLI::Range(0.1, 10.0));
   for (int id = 0; id < kNumSubtasks; ++id) {
     const std::string flag = std::string("--") + SubtaskName(id) + "-model";
     std::string dashed = flag;
