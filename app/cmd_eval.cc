@@ -150,6 +150,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     bool fixed_window = false;
     bool json = false;
     int trials = 0;
+    std::string matrix_png;
     int threads = std::max(1u, std::thread::hardware_concurrency());
   };
   auto o = std::make_shared<EvalOpts>();
@@ -217,6 +218,8 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   cmd->add_option("--trials", o->trials,
                   "sit_chair (the meta controller): number of trials (default: --episodes)")
       ->check(CLI::Range(1, 10000000));
+  cmd->add_option("--matrix-png", o->matrix_png,
+                  "sit_chair: draw the subtask transition matrices (per start side) here");
   cmd->add_option("--threads", o->threads, "sit_chair: threads (default: all cores)")
       ->check(CLI::Range(1, 1024));
   auto chain = std::make_shared<ChainFlags>();
@@ -366,6 +369,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
           result[t->success ? "filmstrip_success" : "filmstrip_failure"] = {{"path", path},
                                                                             {"trial", t->trial}};
         }
+      }
+      if (!o->matrix_png.empty()) {
+        SaveTransitionMatrixPng(result, o->matrix_png);
+        result["transition_matrix_png"] = o->matrix_png;
       }
       if (o->json) {
         std::cout << result.dump() << "\n";

@@ -44,4 +44,9 @@ Json EvaluateMeta(const TaskEnvConfig& config, const proto::ModelWeights& meta,
                   MetaTrialFrames* first_success = nullptr,
                   MetaTrialFrames* first_failure = nullptr);
 
+// Fig. 7: the `transitions` of an EvaluateMeta result as a PNG, one matrix per start side; rows
+// are where a run of one subtask came from (start or a subtask), columns what followed (a subtask or
+// the episode's end); cells shaded by the row's share, labelled with the count.
+void SaveTransitionMatrixPng(const Json& result, const std::string& path);
+
 }  // namespace perch

@@ -6,7 +6,9 @@
 
 #include "common/paths.h"
 #include "learner/ppo.h"
+#include "tasks/meta_eval.h"
 #include "tasks/model_source.h"
+#include "viz/canvas.h"
 
 namespace perch {
 namespace {
@@ -146,7 +148,44 @@ TEST(MetaEnv, SameSeedSameEpisode) {
   EXPECT_EQ(run(), run());
 }
 
-// The delivered subtasks, loaded from the files the default config names.
+// Trials are seeded by index: the same numbers whatever the thread count; the keys the issue
+// names are there; the transition counts add up to the trials.
+TEST(MetaEval, DeterministicOverThreadsAndCountsEveryTrial) {
+  const TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"});
+  PpoLearner l(PolicyConfig::Meta(57), PpoConfig::Meta(), 4);
+  proto::ModelWeights meta;
+  l.ExportWeights(&meta);
+  MetaEvalOptions o;
+  o.trials = 6;
+  o.seed = 3;
+  o.stochastic = true;  // untrained: sampled, so the trials differ
+  o.threads = 1;
+  int calls = 0;
+  o.progress = [&](int, int) { ++calls; };
+  MetaTrialFrames fail;
+  Json one = EvaluateMeta(c, meta, Untrained(), o, nullptr, &fail);
+  EXPECT_EQ(calls, 6);
+  o.threads = 3;
+  o.progress = nullptr;
+  Json three = EvaluateMeta(c, meta, Untrained(), o);
+  for (const char* k : {"success_rate", "min_dist_mean_m", "min_dist_std_m", "fall_rate",
+                        "transitions", "sequences", "by_side"}) {
+    ASSERT_TRUE(one.contains(k)) << k;
+    EXPECT_EQ(one[k], three[k]) << k;
+  }
+  EXPECT_TRUE(one.contains("success_ci95"));
+  int starts = 0;
+  for (const auto& [side, rows] : one["transitions"].items()) {
+    for (const auto& [to, n] : rows["start"].items()) starts += n.get<int>();
+  }
+  EXPECT_EQ(starts, 6);
+  EXPECT_GE(fail.trial, 0);
+  EXPECT_FALSE(fail.frames.empty());
+  const std::string png = ::testing::TempDir() + "/matrix.png";
+  SaveTransitionMatrixPng(one, png);
+  EXPECT_GT(Canvas::LoadPng(png).width(), 500);
+}
+
 // The delivered subtasks, loaded from the files the default config names.
 TEST(MetaEnv, LoadsTheConfiguredSubtasksAndTheWalkerWalksToATarget) {
   // Spawned 8 m from the zone's centre, facing it: 4 s of walking stays clear of the chair.
