@@ -35,11 +35,12 @@ int SubtaskIdOf(const std::string& name) {
 
 MetaConfig MetaConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(j, {"choices", "period", "subtask_stochastic", "subtasks"}, ctx);
+  CheckKnownKeys(j, {"choices", "period", "subtask_stochastic", "fixed_order", "subtasks"}, ctx);
   MetaConfig c;
   GetOptional(j, "choices", c.choices, ctx);
   GetOptional(j, "period", c.period, ctx);
   GetOptional(j, "subtask_stochastic", c.subtask_stochastic, ctx);
+  GetOptional(j, "fixed_order", c.fixed_order, ctx);
   if (j.contains("subtasks")) {
     const Json& s = j["subtasks"];
     const std::string sc = ctx + ".subtasks";
@@ -77,6 +78,7 @@ Json MetaConfig::ToJson() const {
   for (int id = 0; id < kNumSubtasks; ++id) subs[SubtaskName(id)] = subtasks[id];
   return Json{{"choices", choices},
               {"period", period},
+              {"fixed_order", fixed_order},
               {"subtask_stochastic", subtask_stochastic},
               {"subtasks", subs}};
 }

@@ -38,6 +38,9 @@ struct MetaConfig {
   std::vector<std::string> choices{"turn_left", "turn_right", "sit", "walk"};
   int period = 30;                 // control steps per meta decision (0.495 s, about 2 Hz)
   bool subtask_stochastic = true;  // subtasks sample their actions (authors, notes 9.7)
+  // The fixed-order baselines (paper Table 3): `choices` is the order the subtasks run in, and the
+  // meta can only keep the running one or trigger the next (choosing any other class keeps it).
+  bool fixed_order = false;
   // Frozen subtask checkpoints by SubtaskId (the fine-tuned ones, as the authors' chain).
   std::array<std::string, 4> subtasks{"models/turn_left_from_walk/policy.bin",
                                       "models/turn_right_from_walk/policy.bin",

@@ -97,7 +97,9 @@ void MetaEnv::SetFrozenPolicies(const std::vector<FrozenPolicyData>& policies) {
 
 void MetaEnv::Reset(float* obs) {
   env_->Reset(inner_obs_.data());  // SitChairTask: walk active, target = the chair's origin
-  active_ = kWalk;
+  // Fixed order: the first of `choices` runs first (walk in the authors' baselines).
+  active_ = meta_.fixed_order ? choice_ids_[0] : kWalk;
+  order_pos_ = 0;
   begun_ = false;
   contact_run_ = 0;
   prev_dist_ = env_->PelvisSeatDistance();
@@ -115,7 +117,8 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
   const float a0 = FiniteOr0(action[0]);
   const int cls = std::clamp(static_cast<int>(std::lround(std::clamp(a0, -1e6f, 1e6f))), 0,
                              static_cast<int>(choice_ids_.size()) - 1);
-  const int sub = choice_ids_[cls];
+  if (meta_.fixed_order && cls == order_pos_ + 1) ++order_pos_;  // only "next" moves on
+  const int sub = choice_ids_[meta_.fixed_order ? order_pos_ : cls];
   // The walk target, whatever was chosen (only walk reads it): dist along the heading turned by
   // theta, from the torso (notes 4.7).
   const double theta = FiniteOr0(action[1]);

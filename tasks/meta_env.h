@@ -72,6 +72,7 @@ class MetaEnv : public Env, public FrozenPolicyEnv {
   Rng rng_;  // the subtasks' action noise
   std::vector<float> inner_obs_, action_;
   int active_ = kWalk;
+  int order_pos_ = 0;  // fixed_order: index in choices of the running subtask
   bool begun_ = false;
   int contact_run_ = 0;     // control steps of continuous seated contact
   int success_steps_ = 0;   // ... needed for success

@@ -113,6 +113,32 @@ TEST(MetaEnv, OneStepRunsThePeriodWithTheChosenSubtaskAndPaysEq8) {
   EXPECT_EQ(env.episode().sequence, std::vector<int>{kWalk});
 }
 
+// Table 3's fixed-order baseline: the meta can only keep the running subtask or trigger the next.
+TEST(MetaEnv, FixedOrderOnlyEverMovesToTheNextSubtask) {
+  TaskEnvConfig c = MetaConfigFor({"walk", "turn_left", "sit"}, 1, 8.0);
+  c.MutableSection<SitChairTaskConfig>().meta.fixed_order = true;
+  c.MutableSection<SitChairTaskConfig>().meta.period = 1;  // seven decisions before any fall
+  MetaEnv env(c);
+  env.SetFrozenPolicies(Untrained());
+  std::vector<float> obs(57);
+  env.Seed(2);
+  env.Reset(obs.data());
+  std::vector<int> active;
+  for (const float cls : {2.0f, 0.0f, 1.0f, 0.0f, 1.0f, 2.0f, 0.0f}) {
+    std::vector<float> a{cls, 0.0f, 1.0f};
+    const StepResult r = env.Step(a.data(), obs.data());
+    active.push_back(env.active());
+    if (r.terminated) break;
+  }
+  // sit skipped -> walk; 0 keeps it; 1 = next -> turn; 0, 1 keep the turn; 2 -> sit; 0 keeps sit.
+  const std::vector<int> want{kWalk, kWalk, kLeftTurn, kLeftTurn, kLeftTurn, kSit, kSit};
+  ASSERT_GE(active.size(), 6u) << "fell too early to judge";
+  for (size_t i = 0; i < active.size(); ++i) EXPECT_EQ(active[i], want[i]) << i;
+  for (size_t i = 1; i < env.episode().sequence.size(); ++i) {
+    EXPECT_NE(env.episode().sequence[i], kWalk);  // never back
+  }
+}
+
 TEST(MetaEnv, HostileActionsAreClampedNotFatal) {
   MetaEnv env(MetaConfigFor({"turn_left", "turn_right", "sit", "walk"}));
   env.SetFrozenPolicies(Untrained());
