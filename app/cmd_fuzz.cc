@@ -42,6 +42,7 @@ double NowS() {
 struct FuzzFlags {
   std::vector<std::string> targets = {"wire", "checkpoint", "bvh", "config"};
   double seconds = 5.0;  // per target
+  uint64_t cases = 0;    // per target: stop after this many mutated inputs (0: only --seconds)
   uint64_t seed = 1;
   bool json = false;
 };
@@ -226,7 +227,10 @@ int RunFuzz(const FuzzFlags& f) {
   const char* d = ::mkdtemp(tmpl);
   if (d == nullptr) throw std::runtime_error("mkdtemp failed");
   const std::string dir = d;
-  Json out{{"bench", "fuzz"}, {"seconds_per_target", f.seconds}, {"seed", f.seed}};
+  Json out{{"bench", "fuzz"},
+           {"seconds_per_target", f.seconds},
+           {"cases_per_target", f.cases},
+           {"seed", f.seed}};
   Json results = Json::object();
   int findings_total = 0;
   for (const std::string& name : f.targets) {
@@ -250,7 +254,8 @@ int RunFuzz(const FuzzFlags& f) {
     for (const std::string& s : t.seeds) {
       if (std::string why = t.run(s); !why.empty()) findings.push_back("seed: " + why);
     }
-    while (NowS() - t0 < f.seconds) {
+    // A case count makes the run the same on any machine (tests); seconds bound it in time.
+    while (NowS() - t0 < f.seconds && (f.cases == 0 || cases < f.cases)) {
       const std::string input = Mutate(t.seeds[rng.NextU64() % t.seeds.size()], t.seeds, rng);
       std::string why;
       try {
@@ -288,6 +293,8 @@ void RegisterFuzzCommand(CLI::App& root) {
   c->add_option("--target", f->targets, "wire, checkpoint, bvh, config (default: all)")
       ->delimiter(',');
   c->add_option("--seconds", f->seconds, "per target (default 5)");
+  c->add_option("--cases", f->cases,
+                "per target: stop after this many mutated inputs (0: run for --seconds)");
   c->add_option("--seed", f->seed, "mutation seed");
   c->add_flag("--json", f->json, "print one JSON object");
   c->callback([f] {
