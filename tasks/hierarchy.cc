@@ -352,11 +352,6 @@ Json EvaluateChain(const TaskEnvConfig& config,
     min_dists.push_back(min_dist);
   }
   const double n = o.episodes;
-  double mean = 0, var = 0;
-  for (double d : min_dists) mean += d / n;
-  for (double d : min_dists) var += (d - mean) * (d - mean) / n;
-  double sit_mean = 0;
-  for (double t : sit_times) sit_mean += t / std::max<size_t>(1, sit_times.size());
   const auto ci = WilsonInterval95(successes, o.episodes);
   return Json{{"task", "chain"},
               {"zone", config.env.spawn.zone},
@@ -366,13 +361,13 @@ Json EvaluateChain(const TaskEnvConfig& config,
               {"stochastic", o.stochastic},
               {"success_rate", successes / n},
               {"success_ci95", {ci[0], ci[1]}},
-              {"min_dist_mean_m", mean},
-              {"min_dist_std_m", std::sqrt(var)},
+              {"min_dist_mean_m", MeanOf(min_dists)},
+              {"min_dist_std_m", StdOf(min_dists)},
               {"fall_rate", falls / n},
               {"left_turns", left_turns},
               {"right_turns", right_turns},
               {"reached_sit", sits},
-              {"time_to_success_s_mean", sit_mean},
+              {"time_to_success_s_mean", MeanOf(sit_times)},
               {"models",
                {{"walk", paths[kWalk]},
                 {"turn_left", paths[kLeftTurn]},

@@ -70,12 +70,6 @@ TrialResult RunTrial(MetaEnv& env, PolicyRunner& runner, const MetaEvalOptions& 
   return out;
 }
 
-double Mean(const std::vector<double>& v) {
-  double m = 0.0;
-  for (double x : v) m += x / std::max<size_t>(1, v.size());
-  return m;
-}
-
 }  // namespace
 
 Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& meta,
@@ -153,9 +147,6 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
     seq_count[seq] += 1;
   }
   const double n = o.trials;
-  const double mean = Mean(min_d);
-  double var = 0.0;
-  for (double d : min_d) var += (d - mean) * (d - mean) / n;
   const auto ci = WilsonInterval95(n_success, o.trials);
   std::vector<std::pair<int, std::string>> seqs;
   for (const auto& [s, c] : seq_count) seqs.push_back({c, s});
@@ -179,12 +170,12 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
          {"threads", threads},
          {"success_rate", n_success / n},
          {"success_ci95", {ci[0], ci[1]}},
-         {"min_dist_mean_m", mean},
-         {"min_dist_std_m", std::sqrt(var)},
+         {"min_dist_mean_m", MeanOf(min_d)},
+         {"min_dist_std_m", StdOf(min_d)},
          {"fall_rate", n_fell / n},
-         {"seated_position_error_cm_mean", Mean(pos_cm)},
-         {"seated_orientation_error_deg_mean", Mean(yaw_deg)},
-         {"time_to_sit_s_mean", Mean(t_sit)},
+         {"seated_position_error_cm_mean", MeanOf(pos_cm)},
+         {"seated_orientation_error_deg_mean", MeanOf(yaw_deg)},
+         {"time_to_sit_s_mean", MeanOf(t_sit)},
          {"by_side", sides},
          {"transitions", trans},
          {"sequences", top},

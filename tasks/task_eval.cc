@@ -116,13 +116,20 @@ Json EvaluateEpisodes(const TaskEnvConfig& config, const proto::ModelWeights& we
   return j;
 }
 
-namespace {
-
 double MeanOf(const std::vector<double>& v) {
   double s = 0;
   for (double x : v) s += x;
   return v.empty() ? 0.0 : s / v.size();
 }
+
+double StdOf(const std::vector<double>& v) {
+  const double m = MeanOf(v);
+  double s = 0;
+  for (double x : v) s += (x - m) * (x - m);
+  return v.empty() ? 0.0 : std::sqrt(s / v.size());
+}
+
+namespace {
 
 double Percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0.0;
@@ -228,10 +235,8 @@ class SitMetrics : public EpisodeMetrics {
     (*j)["seat_orientation_error_deg_mean"] = MeanOf(rot_err_deg_);
     (*j)["seat_orientation_error_deg_p90"] = Percentile(rot_err_deg_, 0.9);
     (*j)["first_contact_s_mean"] = MeanOf(time_to_sit_s_);
-    double m = MeanOf(min_dists_), v = 0;
-    for (double x : min_dists_) v += (x - m) * (x - m);
-    (*j)["min_dist_mean_m"] = m;
-    (*j)["min_dist_std_m"] = min_dists_.empty() ? 0.0 : std::sqrt(v / min_dists_.size());
+    (*j)["min_dist_mean_m"] = MeanOf(min_dists_);
+    (*j)["min_dist_std_m"] = StdOf(min_dists_);
   }
 
  private:

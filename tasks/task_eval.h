@@ -34,6 +34,10 @@ struct EvalRecording {
   std::vector<Eigen::Vector2d> targets;  // distinct walk targets [m]
 };
 
+// Mean and population standard deviation of per-episode values (0 for none).
+double MeanOf(const std::vector<double>& v);
+double StdOf(const std::vector<double>& v);
+
 // Wilson score interval of a binomial proportion at 95%: [lo, hi].
 std::array<double, 2> WilsonInterval95(int successes, int n);
 
