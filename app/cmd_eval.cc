@@ -38,6 +38,7 @@ struct ConfigOverrides {
   std::string stage, variant, action_mode, chair;
   std::string start;               // "fixed", "reference" or "end-poses"
   std::vector<std::string> banks;  // --start end-poses: the start-state banks
+  std::string bank_ang_vel;        // "keep" / "zero": the bank state's torso angular velocity
   double target_turn_prob = -1.0;
   double start_noise = 0.02;  // turn / sit: start_joint_noise_rad for evaluation [rad]
 };
@@ -99,9 +100,13 @@ TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_p
     if (task != "turn_left" && task != "turn_right" && task != "sit") {
       throw ConfigError("--start end-poses: only for turn_left, turn_right and sit");
     }
-    sec["start"] = {{"banks", o.banks}, {"prob", 1.0}};
-  } else if (!o.banks.empty()) {
-    throw ConfigError("--bank: only with --start end-poses");
+    // Keeps the config's other start settings (zero_root_ang_vel).
+    if (!sec.contains("start") || !sec["start"].is_object()) sec["start"] = Json::object();
+    sec["start"]["banks"] = o.banks;
+    sec["start"]["prob"] = 1.0;
+    if (!o.bank_ang_vel.empty()) sec["start"]["zero_root_ang_vel"] = o.bank_ang_vel == "zero";
+  } else if (!o.banks.empty() || !o.bank_ang_vel.empty()) {
+    throw ConfigError("--bank / --bank-ang-vel: only with --start end-poses");
   } else if (task != "walk" && task != "stand" && sec.contains("start")) {
     // A fine-tuned policy is evaluated from its clip's first frame unless asked otherwise.
     sec["start"]["prob"] = 0.0;
@@ -183,6 +188,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   cmd->add_option("--bank", o->cfg.banks,
                   "start-state bank(s) for --start end-poses (perch sample-end-poses); several: "
                   "their union");
+  cmd->add_option("--bank-ang-vel", o->cfg.bank_ang_vel,
+                  "--start end-poses: the bank state's torso angular velocity, keep (ours) or zero "
+                  "(the authors restore into a freshly loaded humanoid); default: the config's")
+      ->check(CLI::IsMember({"keep", "zero"}));
   cmd->add_option("--stage", o->cfg.stage, "walk stage override")
       ->check(CLI::IsMember({"forward", "target"}));
   cmd->add_option("--reward-variant", o->cfg.variant, "reward preset override")

@@ -36,15 +36,18 @@ double EnergyCost(const EnergyCostConfig& c, const HumanoidChairEnv& env, const 
 }
 
 BankStartConfig BankStartConfig::FromJson(const Json& j, const std::string& ctx) {
-  CheckKnownKeys(j, {"banks", "prob"}, ctx);
+  CheckKnownKeys(j, {"banks", "prob", "zero_root_ang_vel"}, ctx);
   BankStartConfig c;
   GetOptional(j, "banks", c.banks, ctx);
   GetOptional(j, "prob", c.prob, ctx);
+  GetOptional(j, "zero_root_ang_vel", c.zero_root_ang_vel, ctx);
   if (!(c.prob >= 0 && c.prob <= 1)) throw ConfigError(ctx + ".prob: must be in [0, 1]");
   return c;
 }
 
-Json BankStartConfig::ToJson() const { return Json{{"banks", banks}, {"prob", prob}}; }
+Json BankStartConfig::ToJson() const {
+  return Json{{"banks", banks}, {"prob", prob}, {"zero_root_ang_vel", zero_root_ang_vel}};
+}
 
 MotionPose ClipPlacement::Apply(const MotionPose& p) const {
   const Eigen::AngleAxisd rz(yaw, Eigen::Vector3d::UnitZ());
@@ -136,8 +139,7 @@ void ClipTask::RootVelocities(bool fd, const HumanoidChairEnv& env, int k, Eigen
   }
 }
 
-void ClipTask::PerturbJoints(double rad, const HumanoidChairEnv& env, Rng& rng,
-                             HumanoidState* s) {
+void ClipTask::PerturbJoints(double rad, const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) {
   if (!(rad > 0)) return;  // no draws when off, so other runs keep their streams
   const HumanoidModel& m = env.model();
   for (int j = 0; j < m.num_joints(); ++j) {
@@ -158,7 +160,8 @@ bool ClipTask::BankStart(const BankStartConfig& c, const HumanoidChairEnv& env, 
   const Eigen::AngleAxisd rz(turn, Eigen::Vector3d::UnitZ());
   h.root_quat = (Eigen::Quaterniond(rz) * h.root_quat).normalized();
   h.root_lin_vel = rz * h.root_lin_vel;
-  h.root_ang_vel = rz * h.root_ang_vel;
+  h.root_ang_vel =
+      c.zero_root_ang_vel ? Eigen::Vector3d::Zero() : Eigen::Vector3d(rz * h.root_ang_vel);
   h.root_pos.x() = xy.x();
   h.root_pos.y() = xy.y();
   *s = h;

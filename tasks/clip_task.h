@@ -46,6 +46,9 @@ struct ClipPlacement {
 struct BankStartConfig {
   std::vector<std::string> banks;  // bank files (their union); empty: never
   double prob = 1.0;
+  // The authors restore a 51-number state into a freshly loaded humanoid, so the torso's angular
+  // velocity is zero (notes 1.6); ours keeps the recorded one unless this is set.
+  bool zero_root_ang_vel = false;
   static BankStartConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;
 };

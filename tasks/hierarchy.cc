@@ -139,6 +139,7 @@ bool SitChairTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidS
   // Heading 0 first, so that PlaceAtSpawn's yaw_added (theta + pi) faces the zone's centre.
   h = TransformHorizontally(h, -RpyFromQuat(h.root_quat).z(), 0.0, 0.0);
   *s = PlaceAtSpawn(h, spawn, env.config().chair_placement);
+  if (c_.start.zero_root_ang_vel) s->root_ang_vel.setZero();
   return true;
 }
 

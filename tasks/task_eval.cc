@@ -147,9 +147,12 @@ class TurnMetrics : public EpisodeMetrics {
   void Start(const HumanoidChairEnv& env) override {
     judged_ = false;
     ok_ = false;
+    start_xy_ = env.humanoid_state().root_pos.head<2>();
   }
   void Observe(const HumanoidChairEnv& env, const StepResult& r) override {
     const TurnTask& t = Task(env);
+    last_xy_ = env.humanoid_state().root_pos.head<2>();
+    last_speed_ = env.humanoid_state().root_lin_vel.head<2>().norm();
     if (r.terminated) {
       // Which early-termination rule ended it: the root height (a fall) or the yaw rule.
       const bool low = env.humanoid_state().root_pos.z() < t.config().min_root_z;
@@ -162,6 +165,12 @@ class TurnMetrics : public EpisodeMetrics {
     ok_ = !r.terminated && err_deg <= t.config().success_yaw_tol_deg;
   }
   bool Finish(const HumanoidChairEnv& env, bool fell) override {
+    if (!fell) {
+      // Where the next subtask would start: how far the turn carried the torso, how fast it
+      // still moves at the episode's end.
+      end_speed_.push_back(last_speed_);
+      travel_m_.push_back((last_xy_ - start_xy_).norm());
+    }
     if (!judged_) unjudged_ += 1;  // fell before the judging step
     return judged_ && ok_;
   }
@@ -171,6 +180,9 @@ class TurnMetrics : public EpisodeMetrics {
   void AddSummary(Json* j) const override {
     (*j)["final_yaw_error_deg_mean"] = MeanOf(yaw_err_deg_);
     (*j)["final_yaw_error_deg_p90"] = Percentile(yaw_err_deg_, 0.9);
+    (*j)["end_speed_mps_mean"] = MeanOf(end_speed_);  // episodes that did not fall
+    (*j)["end_speed_mps_p90"] = Percentile(end_speed_, 0.9);
+    (*j)["travel_m_mean"] = MeanOf(travel_m_);
     (*j)["episodes_fell_before_judging"] = unjudged_;
     (*j)["terminations_by_rule"] = Json{{"root_height", ended_low_}, {"yaw", ended_yaw_}};
   }
@@ -183,6 +195,9 @@ class TurnMetrics : public EpisodeMetrics {
   int unjudged_ = 0;
   int ended_low_ = 0, ended_yaw_ = 0;  // early terminations by rule, over all episodes
   std::vector<double> yaw_err_deg_;
+  Eigen::Vector2d start_xy_ = Eigen::Vector2d::Zero(), last_xy_ = Eigen::Vector2d::Zero();
+  double last_speed_ = 0.0;
+  std::vector<double> end_speed_, travel_m_;  // [m/s], [m] per episode that did not fall
 };
 
 // Sit: success = pelvis continuously on the seat (contact rule of the env) for success_contact_s;

@@ -33,14 +33,35 @@ void TurnTaskConfig::ApplyVariant(const std::string& variant, const std::string&
 TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
                                         const std::string& task) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(
-      j,
-      {"reward_variant", "motion_file", "similarity", "rot_weight", "rot_alpha", "root_vel_weight",
-       "root_vel_alpha", "hold_phase", "hold_pose_weight", "hold_energy_weight", "hold_yaw_weight", "hold_yaw_alpha", "energy",
-       "yaw_offset_max_deg", "rsi_prob", "rsi_max_fraction", "min_root_z", "max_yaw_error_deg", "max_episode_steps",
-       "start_joint_noise_rad", "success_after_end_s", "success_yaw_tol_deg", "start",
-       "heading_goal", "heading_lookahead_s"},
-      ctx);
+  CheckKnownKeys(j,
+                 {"reward_variant",
+                  "motion_file",
+                  "similarity",
+                  "rot_weight",
+                  "rot_alpha",
+                  "root_vel_weight",
+                  "root_vel_alpha",
+                  "hold_phase",
+                  "hold_pose_weight",
+                  "hold_energy_weight",
+                  "hold_yaw_weight",
+                  "hold_yaw_alpha",
+                  "hold_still_weight",
+                  "hold_still_alpha",
+                  "energy",
+                  "yaw_offset_max_deg",
+                  "rsi_prob",
+                  "rsi_max_fraction",
+                  "min_root_z",
+                  "max_yaw_error_deg",
+                  "max_episode_steps",
+                  "start_joint_noise_rad",
+                  "success_after_end_s",
+                  "success_yaw_tol_deg",
+                  "start",
+                  "heading_goal",
+                  "heading_lookahead_s"},
+                 ctx);
   TurnTaskConfig c;
   c.motion_file = "data/motions/" + task + ".json";
   std::string variant = c.reward_variant;
@@ -60,11 +81,14 @@ TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
   GetOptional(j, "hold_energy_weight", c.hold_energy_weight, ctx);
   GetOptional(j, "hold_yaw_weight", c.hold_yaw_weight, ctx);
   GetOptional(j, "hold_yaw_alpha", c.hold_yaw_alpha, ctx);
+  GetOptional(j, "hold_still_weight", c.hold_still_weight, ctx);
+  GetOptional(j, "hold_still_alpha", c.hold_still_alpha, ctx);
   if (j.contains("energy")) c.energy = EnergyCostConfig::FromJson(j["energy"], ctx + ".energy");
   GetOptional(j, "yaw_offset_max_deg", c.yaw_offset_max_deg, ctx);
   GetOptional(j, "rsi_prob", c.rsi_prob, ctx);
   GetOptional(j, "rsi_max_fraction", c.rsi_max_fraction, ctx);
-  if (!(c.rsi_prob >= 0 && c.rsi_prob <= 1)) throw ConfigError(ctx + ".rsi_prob: must be in [0, 1]");
+  if (!(c.rsi_prob >= 0 && c.rsi_prob <= 1))
+    throw ConfigError(ctx + ".rsi_prob: must be in [0, 1]");
   if (!(c.rsi_max_fraction >= 0 && c.rsi_max_fraction <= 1)) {
     throw ConfigError(ctx + ".rsi_max_fraction: must be in [0, 1]");
   }
@@ -93,7 +117,8 @@ TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
   if (!(c.success_after_end_s >= 0)) throw ConfigError(ctx + ".success_after_end_s: must be >= 0");
   if (!(c.success_yaw_tol_deg > 0)) throw ConfigError(ctx + ".success_yaw_tol_deg: must be > 0");
   for (double w : {c.rot_weight, c.rot_alpha, c.root_vel_weight, c.root_vel_alpha,
-                   c.hold_pose_weight, c.hold_energy_weight, c.hold_yaw_weight, c.hold_yaw_alpha}) {
+                   c.hold_pose_weight, c.hold_energy_weight, c.hold_yaw_weight, c.hold_yaw_alpha,
+                   c.hold_still_weight, c.hold_still_alpha}) {
     if (!(w >= 0)) throw ConfigError(ctx + ": reward weights and sharpness must be >= 0");
   }
   return c;
@@ -112,6 +137,8 @@ Json TurnTaskConfig::ToJson() const {
               {"hold_energy_weight", hold_energy_weight},
               {"hold_yaw_weight", hold_yaw_weight},
               {"hold_yaw_alpha", hold_yaw_alpha},
+              {"hold_still_weight", hold_still_weight},
+              {"hold_still_alpha", hold_still_alpha},
               {"energy", energy.ToJson()},
               {"yaw_offset_max_deg", yaw_offset_max_deg},
               {"rsi_prob", rsi_prob},
@@ -194,6 +221,10 @@ TaskStep TurnTask::OnStep(const HumanoidChairEnv& env, const float* action) {
   if (ClipEnded(k) && c_.hold_yaw_weight > 0) {
     t.yaw = c_.hold_yaw_weight * std::exp(-c_.hold_yaw_alpha * t.yaw_error_rad * t.yaw_error_rad);
   }
+  if (ClipEnded(k) && c_.hold_still_weight > 0) {
+    const double v2 = env.humanoid_state().root_lin_vel.head<2>().squaredNorm();
+    t.still = c_.hold_still_weight * std::exp(-c_.hold_still_alpha * v2);
+  }
   if (c_.hold_phase && ClipEnded(k)) {
     t.similarity = c_.hold_pose_weight * t.pose;
     t.energy = c_.hold_energy_weight * EnergyCost(c_.energy, env, action);
@@ -206,7 +237,7 @@ TaskStep TurnTask::OnStep(const HumanoidChairEnv& env, const float* action) {
           RootVelocityReward(v.data(), v_ref.data(), c_.root_vel_weight, c_.root_vel_alpha);
     }
   }
-  t.total = t.similarity + t.rotation + t.root_vel + t.energy + t.yaw;
+  t.total = t.similarity + t.rotation + t.root_vel + t.energy + t.yaw + t.still;
   terms_ = t;
   RememberPose(env);
   TaskStep r;

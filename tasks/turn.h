@@ -32,6 +32,11 @@ struct TurnTaskConfig {
   // rewards ending on the reference's final heading, which success tests to 20 deg.
   double hold_yaw_weight = 0.0;
   double hold_yaw_alpha = 10.0;  // [1/rad^2]
+  // Ours (default off): once the clip has ended, + hold_still_weight exp(-hold_still_alpha |v|^2),
+  // v the torso's horizontal velocity, so the turn comes to rest (the next subtask, sit, starts
+  // from there; a turn entered at walking speed otherwise keeps walking).
+  double hold_still_weight = 0.0;
+  double hold_still_alpha = 10.0;  // [s^2/m^2]
   EnergyCostConfig energy;
   double yaw_offset_max_deg = 180.0;  // yaw offset ~ U(-max, max) per episode (notes 4.3)
   // Reference state initialisation (ours for turns; the paper starts turns at frame 0): with
@@ -39,13 +44,13 @@ struct TurnTaskConfig {
   // velocities there. Training only: perch eval starts at frame 0.
   double rsi_prob = 0.0;
   double rsi_max_fraction = 0.9;
-  double min_root_z = 0.78;           // early termination [m]
-  double max_yaw_error_deg = 45.0;    // early termination: |yaw - reference yaw| above [deg]
+  double min_root_z = 0.78;         // early termination [m]
+  double max_yaw_error_deg = 45.0;  // early termination: |yaw - reference yaw| above [deg]
   int max_episode_steps = 300;
   // Joint angles of the start pose += U(-x, x) [rad] (0: the paper). perch eval uses 0.02 so that
   // its episodes are distinct trials: from exactly one start with mean actions every episode of
   // a deterministic simulation is the same.
-  double start_joint_noise_rad = 0.0;        // authors: 300 control steps (4.95 s)
+  double start_joint_noise_rad = 0.0;  // authors: 300 control steps (4.95 s)
   // Success (ours; docs/subtasks.md): no early termination until success_after_end_s after the
   // clip ends, and then the yaw within success_yaw_tol_deg of the reference's last frame.
   double success_after_end_s = 0.5;
@@ -68,6 +73,7 @@ struct TurnTaskConfig {
 
 struct TurnTerms {
   double pose = 0, joint_vel = 0, similarity = 0, rotation = 0, root_vel = 0, energy = 0, yaw = 0;
+  double still = 0;
   double total = 0;
   double yaw_error_rad = 0;  // wrap(yaw - reference yaw)
 };
@@ -89,10 +95,16 @@ class TurnTask : public ClipTask {
   const TurnTerms& last_terms() const { return terms_; }
   Json LastRewardTerms() const override {
     const TurnTerms& t = terms_;
-    return Json{{"pose", t.pose},       {"joint_vel", t.joint_vel},
-                {"similarity", t.similarity}, {"rotation", t.rotation},
-                {"root_vel", t.root_vel}, {"energy", t.energy}, {"yaw", t.yaw},
-                {"total", t.total},     {"yaw_error_rad", t.yaw_error_rad}};
+    return Json{{"pose", t.pose},
+                {"joint_vel", t.joint_vel},
+                {"similarity", t.similarity},
+                {"rotation", t.rotation},
+                {"root_vel", t.root_vel},
+                {"energy", t.energy},
+                {"yaw", t.yaw},
+                {"still", t.still},
+                {"total", t.total},
+                {"yaw_error_rad", t.yaw_error_rad}};
   }
   // The step at which success is judged (clip end + success_after_end_s).
   int SuccessStep() const;

@@ -36,7 +36,8 @@ TEST(TurnTask, HeadingGoalIsTheReferenceHeadingRelativeToTheHumanoid) {
   // look-ahead) relative to the humanoid's yaw, at the reset and after every step.
   for (double ahead : {0.0, 0.3}) {
     SCOPED_TRACE(ahead);
-    auto env = MakeTurnEnv("turn_left", Json{{"heading_goal", true}, {"heading_lookahead_s", ahead}});
+    auto env =
+        MakeTurnEnv("turn_left", Json{{"heading_goal", true}, {"heading_lookahead_s", ahead}});
     ASSERT_EQ(env->spec().obs_dim, 52);
     EXPECT_EQ(env->spec().obs_slices.back().name, "goal");
     std::vector<float> obs(52), zero(21, 0.0f);
@@ -63,7 +64,9 @@ TEST(TurnTask, HeadingGoalIsTheReferenceHeadingRelativeToTheHumanoid) {
   // Off by default: the paper's 50-d state; a 50-d layout with the goal on is refused by field.
   EXPECT_EQ(MakeTurnEnv("turn_right")->spec().obs_dim, 50);
   try {
-    TaskEnvConfig::FromJson(Json{{"task", "turn_left"}, {"chair", "none"}, {"obs_layout", "proprio"},
+    TaskEnvConfig::FromJson(Json{{"task", "turn_left"},
+                                 {"chair", "none"},
+                                 {"obs_layout", "proprio"},
                                  {"turn_left", {{"heading_goal", true}}}},
                             "cfg");
     ADD_FAILURE() << "accepted";
@@ -229,6 +232,33 @@ TEST(TurnTask, HoldYawTermRewardsTheFinalHeadingOnlyAfterTheClip) {
     EXPECT_NEAR(r.reward, t.similarity + t.rotation + t.root_vel + t.energy + t.yaw, 1e-5) << k;
   }
   EXPECT_THROW(MakeTurnEnv("turn_left", Json{{"hold_yaw_weight", -1.0}}), ConfigError);
+}
+
+TEST(TurnTask, HoldStillTermRewardsRestingAfterTheClipOnly) {
+  auto env = MakeTurnEnv("turn_right", Json{{"hold_still_weight", 0.3},
+                                            {"hold_still_alpha", 4.0},
+                                            {"min_root_z", 0.0},
+                                            {"max_yaw_error_deg", 180.0}});
+  std::vector<float> obs(env->spec().obs_dim), next(obs.size());
+  std::vector<float> zero(env->spec().act_dim, 0.0f);
+  env->Seed(5);
+  env->Reset(obs.data());
+  const int end = TaskOf(*env).ClipEndStep();
+  for (int k = 1; k <= end + 30; ++k) {
+    const StepResult r = env->Step(zero.data(), next.data());
+    ASSERT_FALSE(r.terminated) << k;
+    const TurnTerms& t = TaskOf(*env).last_terms();
+    const double v2 = env->humanoid_state().root_lin_vel.head<2>().squaredNorm();
+    if (k < end) {
+      EXPECT_EQ(t.still, 0.0) << k;
+    } else {
+      EXPECT_NEAR(t.still, 0.3 * std::exp(-4.0 * v2), 1e-9) << k;
+      EXPECT_GT(t.still, 0.0) << k;
+    }
+    EXPECT_NEAR(r.reward, t.similarity + t.rotation + t.root_vel + t.energy + t.yaw + t.still, 1e-5)
+        << k;
+  }
+  EXPECT_THROW(MakeTurnEnv("turn_right", Json{{"hold_still_alpha", -1.0}}), ConfigError);
 }
 
 TEST(TurnTask, ConfigErrorsNameTheField) {
