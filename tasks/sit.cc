@@ -56,7 +56,10 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
                   "max_seat_height_m",
                   "start",
                   "start_noise_m",
-                  "start_noise_deg"},
+                  "start_noise_deg",
+                  "start_extra_along_m",
+                  "start_extra_across_m",
+                  "start_extra_yaw_deg"},
                  ctx);
   SitTaskConfig c;
   std::string variant = c.reward_variant;
@@ -101,6 +104,19 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!(c.start_noise_m[0] >= 0 && c.start_noise_m[1] >= 0 && c.start_noise_deg >= 0)) {
     throw ConfigError(ctx + ".start_noise_m/start_noise_deg: must be >= 0");
   }
+  GetOptional(j, "start_extra_along_m", c.start_extra_along_m, ctx);
+  GetOptional(j, "start_extra_across_m", c.start_extra_across_m, ctx);
+  GetOptional(j, "start_extra_yaw_deg", c.start_extra_yaw_deg, ctx);
+  if (!(c.start_extra_along_m[0] <= c.start_extra_along_m[1] &&
+        std::abs(c.start_extra_along_m[0]) <= 2.0 && std::abs(c.start_extra_along_m[1]) <= 2.0)) {
+    throw ConfigError(ctx + ".start_extra_along_m: expected [lo, hi] with lo <= hi, within +-2 m");
+  }
+  if (!(c.start_extra_across_m >= 0 && c.start_extra_across_m <= 2.0)) {
+    throw ConfigError(ctx + ".start_extra_across_m: must be in [0, 2] m");
+  }
+  if (!(c.start_extra_yaw_deg >= 0 && c.start_extra_yaw_deg <= 180.0)) {
+    throw ConfigError(ctx + ".start_extra_yaw_deg: must be in [0, 180] deg");
+  }
   if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
   if (!(c.rsi_max_fraction >= 0 && c.rsi_max_fraction <= 1)) {
     throw ConfigError(ctx + ".rsi_max_fraction: must be in [0, 1]");
@@ -108,9 +124,9 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!(c.success_contact_s > 0)) throw ConfigError(ctx + ".success_contact_s: must be > 0");
   if (!(c.eval_episode_s > 0)) throw ConfigError(ctx + ".eval_episode_s: must be > 0");
   if (!(c.max_seat_height_m > 0)) throw ConfigError(ctx + ".max_seat_height_m: must be > 0");
-  for (double w : {c.approach_weight, c.hold_pose_weight, c.hold_energy_weight,
-                   c.hold_contact_weight, c.hold_seat_weight, c.hold_seat_alpha,
-                   c.root_pos_weight, c.root_pos_alpha}) {
+  for (double w :
+       {c.approach_weight, c.hold_pose_weight, c.hold_energy_weight, c.hold_contact_weight,
+        c.hold_seat_weight, c.hold_seat_alpha, c.root_pos_weight, c.root_pos_alpha}) {
     if (!(w >= 0)) throw ConfigError(ctx + ": reward weights must be >= 0");
   }
   for (double v : c.pelvis_end_offset) {
@@ -149,7 +165,10 @@ Json SitTaskConfig::ToJson() const {
               {"max_seat_height_m", max_seat_height_m},
               {"start", start.ToJson()},
               {"start_noise_m", start_noise_m},
-              {"start_noise_deg", start_noise_deg}};
+              {"start_noise_deg", start_noise_deg},
+              {"start_extra_along_m", start_extra_along_m},
+              {"start_extra_across_m", start_extra_across_m},
+              {"start_extra_yaw_deg", start_extra_yaw_deg}};
 }
 
 SitTask::SitTask(const SitTaskConfig& config, double control_dt)
@@ -203,7 +222,18 @@ bool SitTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState*
     m_.placement.offset = rt * off + Eigen::Vector3d(seat.x(), seat.y(), 0.0) +
                           rz * Eigen::Vector3d(along, across, 0.0);
     const HumanoidState f0 = StartState(m_.placement, 0.0, false);
-    if (BankStart(c_.start, env, rng, RpyFromQuat(f0.root_quat).z(), f0.root_pos.head<2>(), s)) {
+    // Drawn for every episode (bank or not) when configured; not drawn at all otherwise, so
+    // runs without it keep their random streams.
+    double extra_along = 0.0, extra_across = 0.0, extra_yaw = 0.0;
+    if (c_.start_extra_along_m[1] != 0.0 || c_.start_extra_along_m[0] != 0.0 ||
+        c_.start_extra_across_m > 0.0 || c_.start_extra_yaw_deg > 0.0) {
+      extra_along = rng.Uniform(c_.start_extra_along_m[0], c_.start_extra_along_m[1]);
+      extra_across = rng.Uniform(-c_.start_extra_across_m, c_.start_extra_across_m);
+      extra_yaw = rng.Uniform(-c_.start_extra_yaw_deg, c_.start_extra_yaw_deg) * M_PI / 180.0;
+    }
+    const Eigen::Vector2d xy =
+        f0.root_pos.head<2>() + (rz * Eigen::Vector3d(extra_along, extra_across, 0.0)).head<2>();
+    if (BankStart(c_.start, env, rng, RpyFromQuat(f0.root_quat).z() + extra_yaw, xy, s)) {
       m_.t0 = 0.0;
       PerturbJoints(c_.start_joint_noise_rad, env, rng, s);
       return true;

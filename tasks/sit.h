@@ -60,7 +60,14 @@ struct SitTaskConfig {
   BankStartConfig start{{}, 0.5};
   std::array<double, 2> start_noise_m{1.0 / 30.0, 0.1};
   double start_noise_deg = 180.0 / 27.0;
-  double min_root_z = 0.54;     // early termination [m]
+  // Ours (default off): a bank start's humanoid (not the clip) is moved a further
+  // U(start_extra_along_m) along the chair's facing direction (away from the seat),
+  // U(-start_extra_across_m, +) across it and its heading turned by U(-start_extra_yaw_deg, +),
+  // so the policy learns to back up to the seat from where a turn really ends.
+  std::array<double, 2> start_extra_along_m{0.0, 0.0};
+  double start_extra_across_m = 0.0;
+  double start_extra_yaw_deg = 0.0;
+  double min_root_z = 0.54;  // early termination [m]
   int max_episode_steps = 300;
   // Joint angles of the start pose += U(-x, x) [rad] (0: the paper). perch eval uses 0.02 so that
   // its episodes are distinct trials: from exactly one start with mean actions every episode of
@@ -100,9 +107,15 @@ class SitTask : public ClipTask {
   const SitTerms& last_terms() const { return terms_; }
   Json LastRewardTerms() const override {
     const SitTerms& t = terms_;
-    return Json{{"pose", t.pose},         {"joint_vel", t.joint_vel}, {"similarity", t.similarity},
-                {"approach", t.approach}, {"energy", t.energy},       {"contact", t.contact},
-                {"seat", t.seat},         {"root_pos", t.root_pos}, {"total", t.total},
+    return Json{{"pose", t.pose},
+                {"joint_vel", t.joint_vel},
+                {"similarity", t.similarity},
+                {"approach", t.approach},
+                {"energy", t.energy},
+                {"contact", t.contact},
+                {"seat", t.seat},
+                {"root_pos", t.root_pos},
+                {"total", t.total},
                 {"seat_distance_m", t.seat_distance_m}};
   }
   // The placement of the clip for a chair: facing the chair's front, pelvis end over the seat.

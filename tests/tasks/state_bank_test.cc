@@ -164,5 +164,48 @@ TEST(StateBank, TurnFromWalkStartsFromABankPoseTurnedToTheClipsHeading) {
   }
 }
 
+TEST(StateBank, SitBankStartsMoveByTheExtraOffsetAndCanDropTheSpin) {
+  const proto::StateBank bank = SmallWalkBank(2);
+  const std::string path = Temp("walk_bank_sit.bin");
+  WriteStateBank(path, bank, false);
+  auto make = [&](const Json& extra) {
+    Json sit{{"start", {{"banks", {path}}, {"prob", 1.0}}}};
+    for (auto it = extra.begin(); it != extra.end(); ++it) sit[it.key()] = it.value();
+    if (extra.contains("zero_root_ang_vel")) {
+      sit.erase("zero_root_ang_vel");
+      sit["start"]["zero_root_ang_vel"] = true;
+    }
+    return MakeTaskHumanoidEnv(
+        TaskEnvConfig::FromJson({{"task", "sit"}, {"chair", "authors"}, {"sit", sit}}, "t"));
+  };
+  auto plain = make(Json::object());
+  auto moved = make({{"start_extra_along_m", {0.3, 0.3}}, {"start_extra_across_m", 0.0}});
+  auto turned = make({{"start_extra_yaw_deg", 30.0}});
+  auto still = make({{"zero_root_ang_vel", true}});
+  std::vector<float> obs(57);
+  double max_turn = 0.0;
+  for (int seed = 0; seed < 6; ++seed) {
+    for (auto* e : {plain.get(), moved.get(), turned.get(), still.get()}) {
+      e->Seed(seed);
+      e->Reset(obs.data());
+    }
+    const HumanoidState &p = plain->humanoid_state(), &m = moved->humanoid_state();
+    // The authors' chair faces +x: 0.3 m further from the seat, nothing across (Bullet keeps
+    // the pose in single precision).
+    EXPECT_NEAR(m.root_pos.x() - p.root_pos.x(), 0.3, 1e-5) << seed;
+    EXPECT_NEAR(m.root_pos.y() - p.root_pos.y(), 0.0, 1e-5) << seed;
+    EXPECT_NEAR(AngleDiff(moved->RootRpy().z(), plain->RootRpy().z()), 0.0, 1e-5) << seed;
+    const double turn = std::abs(AngleDiff(turned->RootRpy().z(), plain->RootRpy().z()));
+    EXPECT_LE(turn, 30.0 * M_PI / 180.0 + 1e-5) << seed;
+    max_turn = std::max(max_turn, turn);
+    EXPECT_NEAR((turned->humanoid_state().root_pos - p.root_pos).head<2>().norm(), 0.0, 1e-5);
+    EXPECT_EQ(still->humanoid_state().root_ang_vel.norm(), 0.0) << seed;
+    EXPECT_GT(p.root_ang_vel.norm(), 0.0) << seed;  // walk end poses spin
+  }
+  EXPECT_GT(max_turn, 2.0 * M_PI / 180.0);
+  EXPECT_THROW(make({{"start_extra_along_m", {0.5, 0.1}}}), ConfigError);
+  EXPECT_THROW(make({{"start_extra_yaw_deg", -1.0}}), ConfigError);
+}
+
 }  // namespace
 }  // namespace perch
