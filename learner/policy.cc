@@ -402,6 +402,47 @@ proto::ModelWeights DropTrailingInputs(const proto::ModelWeights& w, int obs_dim
   return out;
 }
 
+proto::ModelWeights AppendZeroInputs(const proto::ModelWeights& w, int obs_dim,
+                                     const std::string& ctx) {
+  const PolicyConfig src_c = PolicyConfigFromShape(w.shape(), ctx);
+  if (obs_dim <= src_c.obs_dim) {
+    throw ConfigError(ctx + ": cannot append inputs to go from " + std::to_string(src_c.obs_dim) +
+                      " to " + std::to_string(obs_dim));
+  }
+  const ActorCritic src(src_c, 0);
+  if (w.params_size() != src.num_params()) {
+    throw ConfigError(ctx + ": params has " + std::to_string(w.params_size()) +
+                      " values, its shape needs " + std::to_string(src.num_params()));
+  }
+  PolicyConfig dst_c = src_c;
+  dst_c.obs_dim = obs_dim;
+  ActorCritic dst(dst_c, 0);
+  const float* sp = w.params().data();
+  float* dp = dst.params().data();
+  // W_0 [hidden x in] column-major: the new inputs are new zero columns after the old ones.
+  auto copy_mlp = [&](const Mlp& s_mlp, const float* s, float* d) {
+    const int h = s_mlp.sizes()[1];
+    std::copy(s, s + h * src_c.obs_dim, d);
+    std::fill(d + h * src_c.obs_dim, d + h * obs_dim, 0.0f);
+    const int rest = s_mlp.num_params() - h * src_c.obs_dim;
+    std::copy(s + h * src_c.obs_dim, s + h * src_c.obs_dim + rest, d + h * obs_dim);
+  };
+  copy_mlp(src.policy_mlp(), sp, dp);
+  copy_mlp(src.value_mlp(), sp + src.value_offset(), dp + dst.value_offset());
+  std::copy(sp + src.log_std_offset(), sp + src.log_std_offset() + src_c.act_dim,
+            dp + dst.log_std_offset());
+  proto::ModelWeights out = w;
+  dst.GetShape(out.mutable_shape());
+  out.mutable_params()->Assign(dst.params().data(), dst.params().data() + dst.num_params());
+  if (w.obs_stats().mean_size() == src_c.obs_dim && w.obs_stats().var_size() == src_c.obs_dim) {
+    for (int i = src_c.obs_dim; i < obs_dim; ++i) {
+      out.mutable_obs_stats()->add_mean(0.0);
+      out.mutable_obs_stats()->add_var(1.0);
+    }
+  }
+  return out;
+}
+
 proto::ModelWeights WidenMetaChoices(const proto::ModelWeights& w, const PolicyConfig& mine,
                                      uint64_t seed, const std::string& ctx) {
   const PolicyConfig src_c = PolicyConfigFromShape(w.shape(), ctx);

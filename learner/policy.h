@@ -150,6 +150,11 @@ proto::ModelWeights WidenModelWeights(const proto::ModelWeights& narrow, const P
 // obs_dim is not smaller than w's.
 proto::ModelWeights DropTrailingInputs(const proto::ModelWeights& w, int obs_dim,
                                        const std::string& ctx);
+// The inverse: `extra` inputs appended with zero weights in both networks' first layers (the
+// function is unchanged) and normaliser statistics mean 0, var 1 for them (a meta controller that
+// observes more, e.g. sit_chair.meta.observe_active, starts from one that did not).
+proto::ModelWeights AppendZeroInputs(const proto::ModelWeights& w, int obs_dim,
+                                     const std::string& ctx);
 
 // `w` with the std mode of `mine` (a fine-tune that freezes or frees sigma): into a fixed-sigma
 // network the log-std becomes mine.init_log_std for every action dimension (what fixed means);

@@ -35,12 +35,18 @@ int SubtaskIdOf(const std::string& name) {
 
 MetaConfig MetaConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(j, {"choices", "period", "subtask_stochastic", "fixed_order", "subtasks"}, ctx);
+  CheckKnownKeys(j,
+                 {"choices", "period", "subtask_stochastic", "fixed_order", "observe_active",
+                  "active_time_scale_s", "subtasks"},
+                 ctx);
   MetaConfig c;
   GetOptional(j, "choices", c.choices, ctx);
   GetOptional(j, "period", c.period, ctx);
   GetOptional(j, "subtask_stochastic", c.subtask_stochastic, ctx);
   GetOptional(j, "fixed_order", c.fixed_order, ctx);
+  GetOptional(j, "observe_active", c.observe_active, ctx);
+  GetOptional(j, "active_time_scale_s", c.active_time_scale_s, ctx);
+  if (!(c.active_time_scale_s > 0)) throw ConfigError(ctx + ".active_time_scale_s: must be > 0");
   if (j.contains("subtasks")) {
     const Json& s = j["subtasks"];
     const std::string sc = ctx + ".subtasks";
@@ -80,6 +86,8 @@ Json MetaConfig::ToJson() const {
               {"period", period},
               {"fixed_order", fixed_order},
               {"subtask_stochastic", subtask_stochastic},
+              {"observe_active", observe_active},
+              {"active_time_scale_s", active_time_scale_s},
               {"subtasks", subs}};
 }
 

@@ -41,6 +41,11 @@ struct MetaConfig {
   // The fixed-order baselines (paper Table 3): `choices` is the order the subtasks run in, and the
   // meta can only keep the running one or trigger the next (choosing any other class keeps it).
   bool fixed_order = false;
+  // Ours (default off: the paper's 57-d sit state): the meta also observes which subtask acts
+  // (one-hot over the four, SubtaskId order) and how long it has acted (s / active_time_scale_s,
+  // clipped to 2), since a turn's or a sit's progress is not visible in one posture.
+  bool observe_active = false;
+  double active_time_scale_s = 3.0;
   // Frozen subtask checkpoints by SubtaskId (the fine-tuned ones, as the authors' chain).
   std::array<std::string, 4> subtasks{"models/turn_left_from_walk/policy.bin",
                                       "models/turn_right_from_walk/policy.bin",

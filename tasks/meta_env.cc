@@ -30,7 +30,9 @@ MetaEnv::MetaEnv(const TaskEnvConfig& config) : config_(config) {
   task_ = const_cast<SitChairTask*>(dynamic_cast<const SitChairTask*>(&env_->task()));
   if (task_ == nullptr) throw std::logic_error("meta env: the sit_chair env has another task");
   const EnvSpec& inner = env_->spec();
-  const int obs_dim = ObsLayoutDim(ObsLayout::kProprioChair);  // the meta observes the sit state
+  // The meta observes the sit state (+ the active subtask and its time, when configured).
+  const int obs_dim =
+      ObsLayoutDim(ObsLayout::kProprioChair) + (meta_.observe_active ? kNumSubtasks + 1 : 0);
   spec_.name = "meta_sit_chair";
   spec_.obs_dim = obs_dim;
   spec_.act_dim = 3;  // [switch class, theta, dist]
@@ -42,6 +44,7 @@ MetaEnv::MetaEnv(const TaskEnvConfig& config) : config_(config) {
   spec_.act_low = {0.0f, -1e6f, -1e6f};
   spec_.act_high = {classes, 1e6f, 1e6f};
   spec_.obs_slices = {{"more", 0, 6}, {"joints", 6, 42}, {"feet", 48, 2}, {"chair", 50, 7}};
+  if (meta_.observe_active) spec_.obs_slices.push_back({"active", 57, kNumSubtasks + 1});
   spec_.control_dt = inner.control_dt * meta_.period;
   spec_.max_episode_steps = (inner.max_episode_steps + meta_.period - 1) / meta_.period;
   spec_.has_success = true;
@@ -106,7 +109,17 @@ void MetaEnv::Reset(float* obs) {
   episode_ = MetaEpisode();
   episode_.min_dist_m = prev_dist_;
   episode_.spawn_theta = task_->spawn_theta();
+  active_steps_ = 0;
+  WriteObservation(obs);
+}
+
+void MetaEnv::WriteObservation(float* obs) const {
   env_->WriteObservation(ObsLayout::kProprioChair, obs);
+  if (!meta_.observe_active) return;
+  float* extra = obs + ObsLayoutDim(ObsLayout::kProprioChair);
+  for (int id = 0; id < kNumSubtasks; ++id) extra[id] = id == active_ ? 1.0f : 0.0f;
+  const double s = active_steps_ * env_->spec().control_dt / meta_.active_time_scale_s;
+  extra[kNumSubtasks] = static_cast<float>(std::min(s, 2.0));
 }
 
 StepResult MetaEnv::Step(const float* action, float* obs) {
@@ -136,12 +149,14 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
       policies_->Begin(sub, *env_);
       active_ = sub;
       begun_ = true;
+      active_steps_ = 0;
       episode_.sequence.push_back(sub);
     }
     task_->set_active(sub);
     policies_->Act(sub, *env_, rng_, !meta_.subtask_stochastic, action_.data());
     const StepResult r = env_->Step(action_.data(), inner_obs_.data());
     ++episode_.control_steps;
+    ++active_steps_;
     episode_.min_dist_m = std::min(episode_.min_dist_m, env_->PelvisSeatDistance());
     contact_run_ = env_->PelvisSeatContact() ? contact_run_ + 1 : 0;
     if (episode_.success_step < 0 && contact_run_ >= success_steps_) {
@@ -170,7 +185,7 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
   out.terminated = term;
   out.truncated = trunc;
   episode_.fell = term;
-  env_->WriteObservation(ObsLayout::kProprioChair, obs);
+  WriteObservation(obs);
   return out;
 }
 

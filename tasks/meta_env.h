@@ -61,6 +61,7 @@ class MetaEnv : public Env, public FrozenPolicyEnv {
   std::function<void(const HumanoidChairEnv&, const StepResult&, int active)> on_control_step;
 
  private:
+  void WriteObservation(float* obs) const;
   TaskEnvConfig config_;
   SitChairTaskConfig task_config_;
   MetaConfig meta_;
@@ -74,6 +75,7 @@ class MetaEnv : public Env, public FrozenPolicyEnv {
   int active_ = kWalk;
   int order_pos_ = 0;  // fixed_order: index in choices of the running subtask
   bool begun_ = false;
+  int active_steps_ = 0;    // control steps the active subtask has run
   int contact_run_ = 0;     // control steps of continuous seated contact
   int success_steps_ = 0;   // ... needed for success
   double prev_dist_ = 0.0;  // pelvis - seat distance at the previous meta-step end [m]

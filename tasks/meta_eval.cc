@@ -80,11 +80,14 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
   config.MutableSection<SitChairTaskConfig>().meta.subtask_stochastic = o.stochastic;
   const PolicyConfig pc = PolicyConfigFromShape(meta.shape(), "meta model");
   const MetaConfig& mc = config.Section<SitChairTaskConfig>().meta;
-  if (pc.kind != PolicyKind::kMeta || pc.obs_dim != 57 ||
+  const int obs_dim = 57 + (mc.observe_active ? kNumSubtasks + 1 : 0);
+  if (pc.kind != PolicyKind::kMeta || pc.obs_dim != obs_dim ||
       pc.num_choices != static_cast<int>(mc.choices.size())) {
     throw ConfigError("eval: the model is not a meta policy over this config's " +
-                      std::to_string(mc.choices.size()) + " subtask choices (kind " +
-                      meta.shape().kind() + ", " + std::to_string(pc.num_choices) + " classes)");
+                      std::to_string(mc.choices.size()) + " subtask choices and " +
+                      std::to_string(obs_dim) + " inputs (kind " + meta.shape().kind() + ", " +
+                      std::to_string(pc.num_choices) + " classes, " + std::to_string(pc.obs_dim) +
+                      " inputs)");
   }
   const int threads = std::clamp(o.threads, 1, o.trials);
   std::vector<TrialResult> results(o.trials);

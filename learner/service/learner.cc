@@ -375,6 +375,13 @@ void ApplyInitFrom(const LearnerSetup& setup, PpoLearner* ppo) {
                  ctx, w.shape().obs_dim(), mine.obs_dim);
     w = DropTrailingInputs(w, mine.obs_dim, ctx);
   }
+  // A meta controller that observes more (observe_active) starts from one that did not.
+  if (w.shape().kind() == "meta" && mine.kind == PolicyKind::kMeta &&
+      w.shape().obs_dim() < mine.obs_dim) {
+    spdlog::info("learner: {}: {} inputs widened to {} (the new ones with zero weights)", ctx,
+                 w.shape().obs_dim(), mine.obs_dim);
+    w = AppendZeroInputs(w, mine.obs_dim, ctx);
+  }
   // The walk-only meta pre-training starts the full meta controller (notes 6).
   if (w.shape().kind() == "meta" && mine.kind == PolicyKind::kMeta &&
       w.shape().num_choices() < mine.num_choices) {

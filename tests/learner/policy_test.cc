@@ -346,6 +346,47 @@ TEST(DropTrailingInputs, ActsAsTheSourceWithTheDroppedInputsAtTheirMean) {
   EXPECT_THROW(DropTrailingInputs(w, 60, "t"), ConfigError);
 }
 
+// The meta that observes its active subtask (57 + 5 inputs) starts from one that did not (57): the
+// same actions and value whatever the new inputs hold, until training moves their weights.
+TEST(AppendZeroInputs, ActsAsTheSourceWhateverTheNewInputsHold) {
+  PpoLearner learner(PolicyConfig::Meta(57), PpoConfig::Meta(), 13);
+  proto::ModelWeights w;
+  learner.ExportWeights(&w);
+  Rng rng(8);
+  for (int i = 0; i < w.params_size(); ++i) w.set_params(i, static_cast<float>(rng.Normal() * 0.3));
+  proto::RunningStats* st = w.mutable_obs_stats();
+  st->set_count(50.0);
+  st->clear_mean();
+  st->clear_var();
+  for (int i = 0; i < 57; ++i) {
+    st->add_mean(rng.Uniform(-1.0, 1.0));
+    st->add_var(rng.Uniform(0.5, 2.0));
+  }
+  const proto::ModelWeights wide = AppendZeroInputs(w, 62, "test");
+  EXPECT_EQ(wide.shape().obs_dim(), 62);
+  ASSERT_EQ(wide.obs_stats().mean_size(), 62);
+  EXPECT_EQ(wide.obs_stats().mean(60), 0.0);
+  EXPECT_EQ(wide.obs_stats().var(60), 1.0);
+  EXPECT_EQ(wide.shape().num_choices(), w.shape().num_choices());
+  PolicyRunner src(PolicyConfigFromShape(w.shape(), "w"), NormalizerConfig());
+  PolicyRunner dst(PolicyConfigFromShape(wide.shape(), "d"), NormalizerConfig());
+  src.LoadWeights(w);
+  dst.LoadWeights(wide);
+  src.set_update_obs_stats(false);
+  dst.set_update_obs_stats(false);
+  const int k = PolicyConfigFromShape(w.shape(), "w").act_dim;
+  for (int trial = 0; trial < 5; ++trial) {
+    std::vector<float> x(62), a(k), b(k);
+    for (float& v : x) v = static_cast<float>(rng.Normal() * 2.0);
+    const auto os = src.Act(x.data(), rng, true, nullptr, a.data());
+    const auto od = dst.Act(x.data(), rng, true, nullptr, b.data());
+    for (int i = 0; i < k; ++i) EXPECT_NEAR(a[i], b[i], 1e-5) << i;
+    EXPECT_NEAR(os.value, od.value, 1e-5);
+  }
+  EXPECT_THROW(AppendZeroInputs(w, 57, "t"), ConfigError);
+  EXPECT_THROW(AppendZeroInputs(w, 40, "t"), ConfigError);
+}
+
 }  // namespace
 }  // namespace perch
 

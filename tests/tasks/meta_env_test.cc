@@ -113,6 +113,40 @@ TEST(MetaEnv, OneStepRunsThePeriodWithTheChosenSubtaskAndPaysEq8) {
   EXPECT_EQ(env.episode().sequence, std::vector<int>{kWalk});
 }
 
+TEST(MetaEnv, ObserveActiveAppendsTheActingSubtaskAndItsTime) {
+  TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"});
+  c.MutableSection<SitChairTaskConfig>().meta.observe_active = true;
+  c.MutableSection<SitChairTaskConfig>().min_root_z = 0.0;  // untrained subtasks fall
+  MetaEnv env(c);
+  ASSERT_EQ(env.spec().obs_dim, 57 + kNumSubtasks + 1);
+  env.SetFrozenPolicies(Untrained());
+  std::vector<float> obs(env.spec().obs_dim), plain(57);
+  env.Seed(2);
+  env.Reset(obs.data());
+  for (int id = 0; id < kNumSubtasks; ++id) EXPECT_EQ(obs[57 + id], id == kWalk ? 1.0f : 0.0f);
+  EXPECT_EQ(obs[57 + kNumSubtasks], 0.0f);
+  // The first 57 are the paper's state, as without the option.
+  MetaEnv paper(MetaConfigFor({"turn_left", "turn_right", "sit", "walk"}));
+  paper.SetFrozenPolicies(Untrained());
+  paper.Seed(2);
+  paper.Reset(plain.data());
+  for (int i = 0; i < 57; ++i) EXPECT_EQ(obs[i], plain[i]) << i;
+  const double dt = env.humanoid().spec().control_dt;
+  std::vector<float> left{0.0f, 0.0f, 1.0f}, walk{3.0f, 0.0f, 1.0f};
+  StepResult r = env.Step(left.data(), obs.data());
+  ASSERT_FALSE(r.terminated);
+  EXPECT_EQ(obs[57 + kLeftTurn], 1.0f);
+  EXPECT_EQ(obs[57 + kWalk], 0.0f);
+  EXPECT_NEAR(obs[57 + kNumSubtasks], 30 * dt / 3.0, 1e-6);
+  r = env.Step(left.data(), obs.data());  // the same subtask goes on: its time too
+  ASSERT_FALSE(r.terminated);
+  EXPECT_NEAR(obs[57 + kNumSubtasks], 60 * dt / 3.0, 1e-6);
+  r = env.Step(walk.data(), obs.data());  // another one starts its own clock
+  ASSERT_FALSE(r.terminated);
+  EXPECT_EQ(obs[57 + kWalk], 1.0f);
+  EXPECT_NEAR(obs[57 + kNumSubtasks], 30 * dt / 3.0, 1e-6);
+}
+
 // Table 3's fixed-order baseline: the meta can only keep the running subtask or trigger the next.
 TEST(MetaEnv, FixedOrderOnlyEverMovesToTheNextSubtask) {
   TaskEnvConfig c = MetaConfigFor({"walk", "turn_left", "sit"}, 1, 8.0);
