@@ -139,6 +139,7 @@ struct ChainFlags {
       "models/turn_left/policy.bin", "models/turn_right/policy.bin", "models/sit/policy.bin",
       "models/walk_stage2_fallrestart/checkpoints/ckpt-0000013900.bin"};
   ChainOptions options;
+  std::string save_sit_starts;  // --chain-save-sit-starts: a bank of the states at the switch
 };
 
 }  // namespace
@@ -246,6 +247,20 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   cmd->add_option("--chain-turn-s", chain->options.turn_s, "chain: turn -> sit after this long [s]")
       ->capture_default_str()
       ->check(CLI::Range(0.1, 10.0));
+  cmd->add_option("--chain-sit-yaw-deg", chain->options.sit_yaw_deg,
+                  "chain: also turn -> sit once the heading is within this of the chair's facing "
+                  "direction (0: time only) [deg]")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 90.0));
+  cmd->add_option("--chain-save-sit-starts", chain->save_sit_starts,
+                  "chain: write the full state at every switch to sit as a start-state bank "
+                  "(with the chair; for sit's start.keep_pose)");
+  cmd->add_flag("--chain-stop-at-sit", chain->options.stop_at_sit,
+                "chain: end each episode at the switch to sit (sampling sit starts only)");
+  cmd->add_option("--chain-side", chain->options.side,
+                  "chain: which turn (short: the short way round to the chair's facing)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"short", "left", "right"}));
   for (int id = 0; id < kNumSubtasks; ++id) {
     const std::string flag = std::string("--") + SubtaskName(id) + "-model";
     std::string dashed = flag;
@@ -301,9 +316,36 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       chain->options.episodes = o->eval.episodes;
       chain->options.seed = o->eval.seed;
       chain->options.stochastic = o->eval.stochastic;
+      std::vector<proto::BankState> sit_starts;
+      if (!chain->save_sit_starts.empty()) {
+        // Refuse before the work, as the bank writer would after it.
+        if (std::filesystem::exists(chain->save_sit_starts) && !o->force) {
+          throw ConfigError("--chain-save-sit-starts " + chain->save_sit_starts +
+                            ": exists (--force replaces it)");
+        }
+        chain->options.sit_starts = &sit_starts;
+      }
       std::vector<PoseFrame> frames;
       Json result = EvaluateChain(config, models, files, saved, chain->options,
                                   o->filmstrip.empty() ? nullptr : &frames);
+      if (!chain->save_sit_starts.empty()) {
+        if (sit_starts.empty())
+          throw ConfigError("--chain-save-sit-starts: no episode reached sit");
+        const HumanoidModel model = HumanoidModel::Load(config.env.HumanoidPath());
+        proto::StateBank bank;
+        bank.set_format_version(kStateBankFormat);
+        bank.set_task("chain");
+        bank.set_model_path(files[kWalk] + "," + files[kLeftTurn] + "," + files[kRightTurn]);
+        for (int j = 0; j < model.num_joints(); ++j) bank.add_joint_names(model.joint(j).name);
+        bank.set_count(static_cast<int>(sit_starts.size()));
+        bank.set_seed(o->eval.seed);
+        bank.set_stochastic(o->eval.stochastic);
+        bank.set_env_config_json(config.ToJson().dump());
+        bank.set_episodes_run(o->eval.episodes);
+        for (proto::BankState& b : sit_starts) *bank.add_states() = std::move(b);
+        WriteStateBank(chain->save_sit_starts, bank, o->force);
+        result["sit_starts"] = {{"file", chain->save_sit_starts}, {"states", bank.states_size()}};
+      }
       std::string all_models;
       for (const std::string& f : files) all_models += (all_models.empty() ? "" : ",") + f;
       write_recording("chain", all_models, config.ToJson());

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "envs/spawn.h"
+
 namespace perch {
 
 EnergyCostConfig EnergyCostConfig::FromJson(const Json& j, const std::string& ctx) {
@@ -36,17 +38,21 @@ double EnergyCost(const EnergyCostConfig& c, const HumanoidChairEnv& env, const 
 }
 
 BankStartConfig BankStartConfig::FromJson(const Json& j, const std::string& ctx) {
-  CheckKnownKeys(j, {"banks", "prob", "zero_root_ang_vel"}, ctx);
+  CheckKnownKeys(j, {"banks", "prob", "zero_root_ang_vel", "keep_pose"}, ctx);
   BankStartConfig c;
   GetOptional(j, "banks", c.banks, ctx);
   GetOptional(j, "prob", c.prob, ctx);
   GetOptional(j, "zero_root_ang_vel", c.zero_root_ang_vel, ctx);
+  GetOptional(j, "keep_pose", c.keep_pose, ctx);
   if (!(c.prob >= 0 && c.prob <= 1)) throw ConfigError(ctx + ".prob: must be in [0, 1]");
   return c;
 }
 
 Json BankStartConfig::ToJson() const {
-  return Json{{"banks", banks}, {"prob", prob}, {"zero_root_ang_vel", zero_root_ang_vel}};
+  return Json{{"banks", banks},
+              {"prob", prob},
+              {"zero_root_ang_vel", zero_root_ang_vel},
+              {"keep_pose", keep_pose}};
 }
 
 MotionPose ClipPlacement::Apply(const MotionPose& p) const {
@@ -156,6 +162,23 @@ bool ClipTask::BankStart(const BankStartConfig& c, const HumanoidChairEnv& env, 
   if (!bank_) bank_ = LoadStartBanks(c.banks, env.model());
   const proto::BankState& b = bank_->states[rng.UniformInt(bank_->states.size())];
   HumanoidState h = HumanoidStateOf(b);
+  if (c.keep_pose) {
+    if (!b.has_chair()) {
+      throw ConfigError("start.keep_pose: bank states without a chair (sample them in the chain)");
+    }
+    // From the bank's chair frame to this env's chair placement (yaw and ground position).
+    const ChairPlacement& to = env.config().chair_placement;
+    const Eigen::Quaterniond cq(b.chair_quat().w(), b.chair_quat().x(), b.chair_quat().y(),
+                                b.chair_quat().z());
+    const double turn = to.yaw - RpyFromQuat(cq).z();
+    h.root_pos.x() -= b.chair_pos().x();
+    h.root_pos.y() -= b.chair_pos().y();
+    h = TransformHorizontally(h, turn, to.x, to.y);
+    if (c.zero_root_ang_vel) h.root_ang_vel.setZero();
+    *s = h;
+    from_bank_ = true;
+    return true;
+  }
   const double turn = yaw - RpyFromQuat(h.root_quat).z();
   const Eigen::AngleAxisd rz(turn, Eigen::Vector3d::UnitZ());
   h.root_quat = (Eigen::Quaterniond(rz) * h.root_quat).normalized();

@@ -49,6 +49,9 @@ struct BankStartConfig {
   // The authors restore a 51-number state into a freshly loaded humanoid, so the torso's angular
   // velocity is zero (notes 1.6); ours keeps the recorded one unless this is set.
   bool zero_root_ang_vel = false;
+  // The state where it was relative to its chair (a bank sampled in the chain, whose states
+  // hold the chair), instead of moved to the clip's first frame.
+  bool keep_pose = false;
   static BankStartConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;
 };

@@ -6,6 +6,7 @@
 #include "common/paths.h"
 #include "envs/spawn.h"
 #include "tasks/imitation.h"
+#include "tasks/state_bank.h"
 #include "tasks/task_env.h"
 #include "tasks/task_eval.h"
 #include "tasks/turn.h"
@@ -313,14 +314,25 @@ Json EvaluateChain(const TaskEnvConfig& config,
         if (reached || (k - phase_start) * dt >= o.max_walk_s) {
           // Turn towards the chair's facing direction the short way round.
           const double err = AngleDiff(chair_yaw, env->RootRpy().z());
-          phase = err >= 0 ? kLeftTurn : kRightTurn;
+          phase = o.side == "left"    ? kLeftTurn
+                  : o.side == "right" ? kRightTurn
+                  : err >= 0          ? kLeftTurn
+                                      : kRightTurn;
           (phase == kLeftTurn ? left_turns : right_turns) += 1;
           phase_start = k;
         }
-      } else if (phase != kSit && (k - phase_start) * dt >= o.turn_s) {
+      } else if (phase != kSit && ((k - phase_start) * dt >= o.turn_s ||
+                                   (o.sit_yaw_deg > 0 && (k - phase_start) * dt >= o.turn_min_s &&
+                                    std::abs(AngleDiff(chair_yaw, env->RootRpy().z())) <
+                                        o.sit_yaw_deg * M_PI / 180.0))) {
         phase = kSit;
         ++sits;
         phase_start = k;
+        if (o.sit_starts != nullptr) {
+          o.sit_starts->push_back(CaptureState(*env));
+          o.sit_starts->back().set_episode(static_cast<uint64_t>(e));
+        }
+        if (o.stop_at_sit) break;
       }
       task.set_active(phase);
       if (phase != begun) {
@@ -386,7 +398,10 @@ Json EvaluateChain(const TaskEnvConfig& config,
                {{"approach_dist_m", o.approach_dist_m},
                 {"reach_m", o.reach_m},
                 {"max_walk_s", o.max_walk_s},
-                {"turn_s", o.turn_s}}}};
+                {"turn_s", o.turn_s},
+                {"sit_yaw_deg", o.sit_yaw_deg},
+                {"turn_min_s", o.turn_min_s},
+                {"side", o.side}}}};
 }
 
 }  // namespace perch

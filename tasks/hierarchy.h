@@ -148,10 +148,19 @@ struct ChainOptions {
   int episodes = 100;
   uint64_t seed = 0;
   bool stochastic = false;
-  double approach_dist_m = 0.6;         // walk target: this far in front of the seat target
-  double reach_m = 0.25;                // walk -> turn when body_xyz is this close to the target
-  double max_walk_s = 8.0;              // walk -> turn at the latest
-  double turn_s = 3.2;                  // turn -> sit after this long (the turn clips last 2.9 s)
+  double approach_dist_m = 0.6;  // walk target: this far in front of the seat target
+  double reach_m = 0.25;         // walk -> turn when body_xyz is this close to the target
+  double max_walk_s = 8.0;       // walk -> turn at the latest
+  double turn_s = 3.2;           // turn -> sit after this long (the turn clips last 2.9 s)
+  // Also turn -> sit as soon as the torso heading is within this of the chair's facing direction
+  // (the back to the seat), after turn_min_s of turning; 0: time only.
+  double sit_yaw_deg = 0.0;
+  double turn_min_s = 0.3;
+  std::string side = "short";  // which turn: "short" (the short way round), "left", "right"
+  // When set: the full state at every switch to sit (where a sit starts in the chain), for a
+  // start-state bank; with stop_at_sit the episode ends there (sampling only).
+  std::vector<proto::BankState>* sit_starts = nullptr;
+  bool stop_at_sit = false;
   EpisodeRecorder* recorder = nullptr;  // perch eval --record (not owned)
 };
 

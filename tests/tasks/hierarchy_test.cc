@@ -112,6 +112,34 @@ TEST(Hierarchy, ScriptedChainIsReproducibleAndUntrainedSubtasksNeverSit) {
   EXPECT_EQ(frames.front().label, "walk");
 }
 
+TEST(Hierarchy, ChainSitStartsAreTheStatesAtTheSwitchToSit) {
+  ChainOptions o;
+  o.episodes = 3;
+  o.seed = 2;
+  o.reach_m = 5.0;  // turn at once
+  o.turn_s = 0.1;   // then sit after 6 control steps, before the untrained subtasks fall
+  o.side = "left";
+  o.stop_at_sit = true;
+  std::vector<proto::BankState> starts;
+  o.sit_starts = &starts;
+  std::vector<PoseFrame> frames;
+  const auto models = UntrainedSet();
+  const std::array<std::string, kNumSubtasks> names = {"l", "r", "s", "w"};
+  const Json j = EvaluateChain(SitChair(1), models, names, {}, o, &frames);
+  EXPECT_EQ(j["reached_sit"].get<int>(), 3);
+  EXPECT_EQ(j["left_turns"].get<int>(), 3);
+  EXPECT_EQ(j["fall_rate"].get<double>(), 0.0);  // ended at the switch, not by a fall
+  ASSERT_EQ(starts.size(), 3u);
+  for (size_t e = 0; e < starts.size(); ++e) {
+    EXPECT_TRUE(starts[e].has_chair());
+    EXPECT_EQ(starts[e].episode(), e);
+    EXPECT_EQ(starts[e].step(), 6) << e;  // the turn from step 0, 6 steps (0.1 s) to the switch
+  }
+  // Episode 0 stopped at the switch: its frames are walk and left turn only.
+  for (const PoseFrame& f : frames) EXPECT_NE(f.label, "sit");
+  EXPECT_EQ(frames.back().label, "turn_left");
+}
+
 Json HeadingTurnExperiment(const std::string& task, double lookahead) {
   return Json{{"env",
                {{"task", task},

@@ -207,5 +207,55 @@ TEST(StateBank, SitBankStartsMoveByTheExtraOffsetAndCanDropTheSpin) {
   EXPECT_THROW(make({{"start_extra_yaw_deg", -1.0}}), ConfigError);
 }
 
+TEST(StateBank, KeepPoseRestoresAStateWhereItWasRelativeToItsChair) {
+  // A state captured beside a chair placed elsewhere and turned (as the chain's are)...
+  auto src = MakeTaskHumanoidEnv(
+      TaskEnvConfig::FromJson({{"task", "sit"},
+                               {"chair", "authors"},
+                               {"chair_placement", {{"x", 0.7}, {"y", -0.4}, {"yaw_deg", 40.0}}}},
+                              "t"));
+  std::vector<float> obs(57), next(57), act(21, 0.0f);
+  src->Seed(3);
+  src->Reset(obs.data());
+  for (int k = 0; k < 5; ++k) src->Step(act.data(), next.data());
+  proto::StateBank bank = SmallWalkBank(1);
+  bank.clear_states();
+  *bank.add_states() = CaptureState(*src);
+  ASSERT_TRUE(bank.states(0).has_chair());
+  const std::string path = Temp("chain_like_bank.bin");
+  WriteStateBank(path, bank, false);
+  // ...starts a sit episode at the same place relative to this env's chair.
+  auto dst = MakeTaskHumanoidEnv(TaskEnvConfig::FromJson(
+      {{"task", "sit"},
+       {"chair", "authors"},
+       {"sit", {{"start", {{"banks", {path}}, {"prob", 1.0}, {"keep_pose", true}}}}}},
+      "t"));
+  dst->Seed(1);
+  dst->Reset(obs.data());
+  auto relative = [](const HumanoidChairEnv& e) {
+    const proto::BankState st = CaptureState(e);
+    const Eigen::Vector3d c(st.chair_pos().x(), st.chair_pos().y(), 0.0);
+    const double cy = RpyFromQuat(Eigen::Quaterniond(st.chair_quat().w(), st.chair_quat().x(),
+                                                     st.chair_quat().y(), st.chair_quat().z()))
+                          .z();
+    const Eigen::Vector3d d =
+        Eigen::AngleAxisd(-cy, Eigen::Vector3d::UnitZ()) * (e.humanoid_state().root_pos - c);
+    return Eigen::Vector3d(d.x(), d.y(), AngleDiff(e.RootRpy().z(), cy));
+  };
+  const Eigen::Vector3d a = relative(*src), b = relative(*dst);
+  EXPECT_NEAR((a - b).norm(), 0.0, 2e-3) << a.transpose() << " vs " << b.transpose();
+  EXPECT_GT(a.head<2>().norm(), 0.2);  // not trivially at the chair's origin
+  // Bank states without a chair cannot be kept relative to one.
+  const std::string walk = Temp("walk_bank_keep.bin");
+  WriteStateBank(walk, SmallWalkBank(1), false);
+  auto bad = MakeTaskHumanoidEnv(TaskEnvConfig::FromJson(
+      {{"task", "sit"},
+       {"chair", "authors"},
+       {"sit", {{"start", {{"banks", {walk}}, {"prob", 1.0}, {"keep_pose", true}}}}}},
+      "t"));
+  bad->Seed(1);
+  EXPECT_THROW(bad->Reset(obs.data()), ConfigError);
+}
+
 }  // namespace
 }  // namespace perch
