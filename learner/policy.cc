@@ -363,52 +363,14 @@ proto::ModelWeights WidenModelWeights(const proto::ModelWeights& narrow, const P
   return out;
 }
 
-proto::ModelWeights DropTrailingInputs(const proto::ModelWeights& w, int obs_dim,
-                                       const std::string& ctx) {
-  const PolicyConfig src_c = PolicyConfigFromShape(w.shape(), ctx);
-  if (obs_dim < 1 || obs_dim >= src_c.obs_dim) {
-    throw ConfigError(ctx + ": cannot map " + std::to_string(src_c.obs_dim) + " inputs onto " +
-                      std::to_string(obs_dim) + " (only dropping trailing inputs is supported)");
-  }
-  const ActorCritic src(src_c, 0);
-  if (w.params_size() != src.num_params()) {
-    throw ConfigError(ctx + ": params has " + std::to_string(w.params_size()) +
-                      " values, its shape needs " + std::to_string(src.num_params()));
-  }
-  PolicyConfig dst_c = src_c;
-  dst_c.obs_dim = obs_dim;
-  ActorCritic dst(dst_c, 0);
-  const float* sp = w.params().data();
-  float* dp = dst.params().data();
-  // Each MLP starts with W_0 [hidden x in], column-major: input i is a contiguous column.
-  auto copy_mlp = [&](const Mlp& s_mlp, const float* s, const Mlp& d_mlp, float* d) {
-    const int h = s_mlp.sizes()[1];
-    std::copy(s, s + h * obs_dim, d);
-    const int s_rest = s_mlp.num_params() - h * src_c.obs_dim;
-    std::copy(s + h * src_c.obs_dim, s + h * src_c.obs_dim + s_rest, d + h * obs_dim);
-    (void)d_mlp;
-  };
-  copy_mlp(src.policy_mlp(), sp, dst.policy_mlp(), dp);
-  copy_mlp(src.value_mlp(), sp + src.value_offset(), dst.value_mlp(), dp + dst.value_offset());
-  std::copy(sp + src.log_std_offset(), sp + src.log_std_offset() + src_c.act_dim,
-            dp + dst.log_std_offset());
-  proto::ModelWeights out = w;
-  dst.GetShape(out.mutable_shape());
-  out.mutable_params()->Assign(dst.params().data(), dst.params().data() + dst.num_params());
-  if (w.obs_stats().mean_size() == src_c.obs_dim && w.obs_stats().var_size() == src_c.obs_dim) {
-    out.mutable_obs_stats()->mutable_mean()->Truncate(obs_dim);
-    out.mutable_obs_stats()->mutable_var()->Truncate(obs_dim);
-  }
-  return out;
-}
+namespace {
 
-proto::ModelWeights AppendZeroInputs(const proto::ModelWeights& w, int obs_dim,
-                                     const std::string& ctx) {
+// The first layers of both networks re-sized to `obs_dim` inputs: the first min(old, new) input
+// columns kept, new ones zero (W_0 [hidden x in] is column-major: input i is one column);
+// normaliser statistics truncated, or extended with mean 0, var 1.
+proto::ModelWeights ResizeInputs(const proto::ModelWeights& w, int obs_dim,
+                                 const std::string& ctx) {
   const PolicyConfig src_c = PolicyConfigFromShape(w.shape(), ctx);
-  if (obs_dim <= src_c.obs_dim) {
-    throw ConfigError(ctx + ": cannot append inputs to go from " + std::to_string(src_c.obs_dim) +
-                      " to " + std::to_string(obs_dim));
-  }
   const ActorCritic src(src_c, 0);
   if (w.params_size() != src.num_params()) {
     throw ConfigError(ctx + ": params has " + std::to_string(w.params_size()) +
@@ -419,11 +381,11 @@ proto::ModelWeights AppendZeroInputs(const proto::ModelWeights& w, int obs_dim,
   ActorCritic dst(dst_c, 0);
   const float* sp = w.params().data();
   float* dp = dst.params().data();
-  // W_0 [hidden x in] column-major: the new inputs are new zero columns after the old ones.
+  const int keep = std::min(obs_dim, src_c.obs_dim);
   auto copy_mlp = [&](const Mlp& s_mlp, const float* s, float* d) {
     const int h = s_mlp.sizes()[1];
-    std::copy(s, s + h * src_c.obs_dim, d);
-    std::fill(d + h * src_c.obs_dim, d + h * obs_dim, 0.0f);
+    std::copy(s, s + h * keep, d);
+    std::fill(d + h * keep, d + h * obs_dim, 0.0f);
     const int rest = s_mlp.num_params() - h * src_c.obs_dim;
     std::copy(s + h * src_c.obs_dim, s + h * src_c.obs_dim + rest, d + h * obs_dim);
   };
@@ -435,12 +397,37 @@ proto::ModelWeights AppendZeroInputs(const proto::ModelWeights& w, int obs_dim,
   dst.GetShape(out.mutable_shape());
   out.mutable_params()->Assign(dst.params().data(), dst.params().data() + dst.num_params());
   if (w.obs_stats().mean_size() == src_c.obs_dim && w.obs_stats().var_size() == src_c.obs_dim) {
-    for (int i = src_c.obs_dim; i < obs_dim; ++i) {
-      out.mutable_obs_stats()->add_mean(0.0);
-      out.mutable_obs_stats()->add_var(1.0);
+    proto::RunningStats* st = out.mutable_obs_stats();
+    st->mutable_mean()->Truncate(keep);
+    st->mutable_var()->Truncate(keep);
+    for (int i = keep; i < obs_dim; ++i) {
+      st->add_mean(0.0);
+      st->add_var(1.0);
     }
   }
   return out;
+}
+
+}  // namespace
+
+proto::ModelWeights DropTrailingInputs(const proto::ModelWeights& w, int obs_dim,
+                                       const std::string& ctx) {
+  const int have = w.shape().obs_dim();
+  if (obs_dim < 1 || obs_dim >= have) {
+    throw ConfigError(ctx + ": cannot map " + std::to_string(have) + " inputs onto " +
+                      std::to_string(obs_dim) + " (only dropping trailing inputs is supported)");
+  }
+  return ResizeInputs(w, obs_dim, ctx);
+}
+
+proto::ModelWeights AppendZeroInputs(const proto::ModelWeights& w, int obs_dim,
+                                     const std::string& ctx) {
+  const int have = w.shape().obs_dim();
+  if (obs_dim <= have) {
+    throw ConfigError(ctx + ": cannot append inputs to go from " + std::to_string(have) + " to " +
+                      std::to_string(obs_dim));
+  }
+  return ResizeInputs(w, obs_dim, ctx);
 }
 
 proto::ModelWeights WidenMetaChoices(const proto::ModelWeights& w, const PolicyConfig& mine,
