@@ -108,12 +108,14 @@ std::vector<int> MetaConfig::choice_ids() const {
 SitChairTaskConfig SitChairTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
   CheckKnownKeys(j,
-                 {"support_reward", "approach_weight", "min_root_z", "sit_min_root_z",
-                  "max_episode_steps", "start", "success_contact_s", "meta"},
+                 {"support_reward", "approach_weight", "fall_penalty", "min_root_z",
+                  "sit_min_root_z", "max_episode_steps", "start", "success_contact_s", "meta"},
                  ctx);
   SitChairTaskConfig c;
   GetOptional(j, "support_reward", c.support_reward, ctx);
   GetOptional(j, "approach_weight", c.approach_weight, ctx);
+  GetOptional(j, "fall_penalty", c.fall_penalty, ctx);
+  if (!(c.fall_penalty >= 0)) throw ConfigError(ctx + ".fall_penalty: must be >= 0");
   GetOptional(j, "min_root_z", c.min_root_z, ctx);
   GetOptional(j, "sit_min_root_z", c.sit_min_root_z, ctx);
   GetOptional(j, "max_episode_steps", c.max_episode_steps, ctx);
@@ -128,6 +130,7 @@ SitChairTaskConfig SitChairTaskConfig::FromJson(const Json& j, const std::string
 Json SitChairTaskConfig::ToJson() const {
   return Json{{"support_reward", support_reward},
               {"approach_weight", approach_weight},
+              {"fall_penalty", fall_penalty},
               {"min_root_z", min_root_z},
               {"sit_min_root_z", sit_min_root_z},
               {"max_episode_steps", max_episode_steps},

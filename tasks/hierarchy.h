@@ -64,6 +64,9 @@ struct SitChairTaskConfig {
   // Paper 1.0; the authors' code 5.0 (notes 3.3).
   double support_reward = 1.0;
   double approach_weight = 0.5;
+  // Ours (default 0, the paper has none): subtracted on the meta step that ends in a fall, so
+  // walking into the chair is not free.
+  double fall_penalty = 0.0;
   double min_root_z = 0.78;      // [m]
   double sit_min_root_z = 0.54;  // while the sit subtask is active [m]
   int max_episode_steps = 990;   // 33 meta steps of 30 control steps (notes 4.1)

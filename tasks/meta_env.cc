@@ -182,6 +182,7 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
         ApproachReward(prev_dist_, d, dt * meta_.period, task_config_.approach_weight));
   }
   prev_dist_ = d;
+  if (term) out.reward -= static_cast<float>(task_config_.fall_penalty);
   out.terminated = term;
   out.truncated = trunc;
   episode_.fell = term;

@@ -113,6 +113,32 @@ TEST(MetaEnv, OneStepRunsThePeriodWithTheChosenSubtaskAndPaysEq8) {
   EXPECT_EQ(env.episode().sequence, std::vector<int>{kWalk});
 }
 
+TEST(MetaEnv, FallPenaltyIsPaidOnTheMetaStepThatEndsInAFall) {
+  TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"});
+  TaskEnvConfig p = c;
+  p.MutableSection<SitChairTaskConfig>().fall_penalty = 3.0;
+  MetaEnv plain(c), penalised(p);
+  plain.SetFrozenPolicies(Untrained());
+  penalised.SetFrozenPolicies(Untrained());
+  std::vector<float> oa(57), ob(57), a{0.0f, 0.0f, 1.0f};
+  plain.Seed(4);
+  penalised.Seed(4);
+  plain.Reset(oa.data());
+  penalised.Reset(ob.data());
+  bool fell = false;
+  for (int m = 0; m < 33 && !fell; ++m) {  // untrained subtasks fall within a few meta steps
+    const StepResult ra = plain.Step(a.data(), oa.data());
+    const StepResult rb = penalised.Step(a.data(), ob.data());
+    ASSERT_EQ(ra.terminated, rb.terminated);
+    fell = ra.terminated;
+    EXPECT_NEAR(rb.reward, ra.reward - (fell ? 3.0f : 0.0f), 1e-6) << m;
+  }
+  EXPECT_TRUE(fell);
+  EXPECT_THROW(TaskEnvConfig::FromJson(
+                   {{"task", "sit_chair"}, {"sit_chair", {{"fall_penalty", -1.0}}}}, "t"),
+               ConfigError);
+}
+
 TEST(MetaEnv, ObserveActiveAppendsTheActingSubtaskAndItsTime) {
   TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"});
   c.MutableSection<SitChairTaskConfig>().meta.observe_active = true;
