@@ -223,7 +223,8 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "record only the first K episodes (0: all)")
       ->capture_default_str()
       ->check(CLI::Range(0, 1000000));
-  cmd->add_flag("--force", o->force, "overwrite an existing --record file");
+  cmd->add_flag("--force", o->force,
+                "overwrite an existing --record or --chain-save-sit-starts file");
   cmd->add_flag("--json", o->json, "print one JSON object on stdout");
   cmd->add_option("--trials", o->trials,
                   "sit_chair (the meta controller): number of trials (default: --episodes)")
