@@ -13,6 +13,7 @@ LearnerSetup MakeLearnerSetup(const ExperimentConfig& cfg) {
   s.cluster = cfg.cluster;
   s.resolved_config = ToJson(cfg);
   s.control_dt = env->spec().control_dt;
+  s.mirror = env->spec().mirror;
   s.compat_key = CompatKey(cfg, s.policy);
   for (const FrozenPolicyData& f : ExperimentFrozenPolicies(cfg)) {
     s.frozen.push_back(FrozenPolicyToProto(f));

@@ -15,6 +15,7 @@
 #include "common/paths.h"
 #include "envs/chair.h"
 #include "learner/model_average.h"
+#include "learner/policy.h"
 #include "learner/service/checkpoint.h"
 #include "tasks/hierarchy.h"
 #include "tasks/local_train.h"
@@ -615,6 +616,41 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       std::cout << "wrote " << summary["weights"] << " and " << summary["curve"] << "\n";
     }
   });
+  struct MirrorOpts {
+    std::string model, config, out;
+    bool json = false;
+  };
+  auto mo = std::make_shared<MirrorOpts>();
+  CLI::App* mi = root.add_subcommand("mirror-model",
+                                     "A policy for the mirror-image task (turn right from turn "
+                                     "left): weights mirrored left/right");
+  mi->add_option("--model", mo->model, "policy file of the source task")->required();
+  mi->add_option("--config", mo->config, "task config of the target task (its env's mirror map)")
+      ->required();
+  mi->add_option("--out", mo->out, "output ModelWeights file (must not exist)")->required();
+  mi->add_flag("--json", mo->json, "print one JSON summary on stdout");
+  mi->callback([mo]() {
+    if (std::filesystem::exists(mo->out)) throw ConfigError(mo->out + ": exists; not overwritten");
+    ConfigOverrides co;
+    co.config_path = mo->config;
+    const TaskEnvConfig config = ResolveConfig(co, "");
+    const std::unique_ptr<Env> env = MakeTaskEnv(config);
+    const proto::ModelWeights w =
+        MirrorModelWeights(LoadModelFile(mo->model), env->spec().mirror, mo->model);
+    WriteFileAtomic(mo->out, w.SerializeAsString());
+    Json summary = {{"out", mo->out},
+                    {"model", mo->model},
+                    {"config", mo->config},
+                    {"env", env->spec().name},
+                    {"num_params", w.params_size()}};
+    if (mo->json) {
+      std::cout << summary.dump() << "\n";
+    } else {
+      std::cout << "wrote " << mo->out << " (" << mo->model << " mirrored for " << env->spec().name
+                << ")\n";
+    }
+  });
+
   struct AverageOpts {
     std::vector<std::string> models;
     std::string out;

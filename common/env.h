@@ -15,18 +15,34 @@ struct ObsSlice {
   int size = 0;
 };
 
+// The env's left/right symmetry (world y -> -y) on its flat arrays: the mirror image of a state
+// observes obs'[i] = obs_scale[i] * obs[obs_src[i]] + obs_offset[i], and the mirror image of an
+// action is act'[i] = act_scale[i] * act[act_src[i]] + act_offset[i]. A policy for the mirrored
+// task (turn right from turn left) is then pi'(o) = M_act(pi(M_obs(o))) (learner/policy.h,
+// MirrorModelWeights). Empty when the env has no such symmetry.
+struct MirrorMap {
+  std::vector<int> obs_src;       // [obs_dim] a permutation
+  std::vector<float> obs_scale;   // [obs_dim] nonzero
+  std::vector<float> obs_offset;  // [obs_dim]
+  std::vector<int> act_src;       // [act_dim] a permutation
+  std::vector<float> act_scale;   // [act_dim] nonzero
+  std::vector<float> act_offset;  // [act_dim]
+  bool empty() const { return obs_src.empty(); }
+};
+
 struct EnvSpec {
   std::string name;
-  int obs_dim = 0;                 // length of the observation vector
-  int act_dim = 0;                 // length of the action vector
-  std::vector<float> obs_low;      // [obs_dim] bounds observations are clipped to
-  std::vector<float> obs_high;     // [obs_dim]
-  std::vector<float> act_low;      // [act_dim] the env clips actions to these
-  std::vector<float> act_high;     // [act_dim]
+  int obs_dim = 0;                   // length of the observation vector
+  int act_dim = 0;                   // length of the action vector
+  std::vector<float> obs_low;        // [obs_dim] bounds observations are clipped to
+  std::vector<float> obs_high;       // [obs_dim]
+  std::vector<float> act_low;        // [act_dim] the env clips actions to these
+  std::vector<float> act_high;       // [act_dim]
   std::vector<ObsSlice> obs_slices;  // which slices are which
-  double control_dt = 1.0 / 60.0;  // seconds per Step()
-  int max_episode_steps = 1000;    // truncation limit, in Step() calls
-  bool has_success = false;        // the task has a success test (StepResult::success)
+  double control_dt = 1.0 / 60.0;    // seconds per Step()
+  int max_episode_steps = 1000;      // truncation limit, in Step() calls
+  bool has_success = false;          // the task has a success test (StepResult::success)
+  MirrorMap mirror;                  // left/right symmetry of obs and actions (may be empty)
 };
 
 // Result of one Step(). `terminated` (e.g. fell) and `truncated` (time limit) are distinct:

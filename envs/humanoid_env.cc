@@ -166,6 +166,82 @@ HumanoidChairEnv::HumanoidChairEnv(const EnvConfig& config, std::unique_ptr<Task
 
 HumanoidChairEnv::~HumanoidChairEnv() = default;
 
+MirrorMap BuildMirrorMap(const HumanoidModel& model, ObsLayout layout, ActionMode mode) {
+  std::vector<int> c;
+  std::vector<double> sign;
+  MirrorJointMap(model, &c, &sign);
+  MirrorMap m;
+  const int obs_dim = ObsLayoutDim(layout);
+  m.obs_src.resize(obs_dim);
+  m.obs_scale.assign(obs_dim, 1.0f);
+  m.obs_offset.assign(obs_dim, 0.0f);
+  for (int i = 0; i < obs_dim; ++i) m.obs_src[i] = i;
+  // more(6): height, roll, pitch, heading-frame velocity: roll and the sideways speed flip.
+  m.obs_scale[1] = -1.0f;
+  m.obs_scale[4] = -1.0f;
+  // joints(42): q' of joint c(j) = sign_j q_j; in normalised units q_n = (q - mid) / half-range,
+  // so q_n' = sign hr_j / hr_c q_n + (sign mid_j - mid_c) / hr_c (exactly +-q_n for mirrored
+  // limits).
+  for (int j = 0; j < model.num_joints(); ++j) {
+    const Joint& a = model.joint(j);
+    const Joint& b = model.joint(c[j]);
+    const double hr_a = 0.5 * (a.upper - a.lower), hr_b = 0.5 * (b.upper - b.lower);
+    const int dst = 6 + 2 * c[j], src = 6 + 2 * j;
+    m.obs_src[dst] = src;
+    m.obs_scale[dst] = static_cast<float>(sign[j] * hr_a / hr_b);
+    m.obs_offset[dst] = static_cast<float>((sign[j] * a.mid() - b.mid()) / hr_b);
+    m.obs_src[dst + 1] = src + 1;
+    m.obs_scale[dst + 1] = static_cast<float>(sign[j]);
+  }
+  // feet(2): right and left swap.
+  m.obs_src[48] = 49;
+  m.obs_src[49] = 48;
+  if (layout == ObsLayout::kProprioGoal) {
+    m.obs_scale[50] = -1.0f;  // sin of the target's azimuth; cos unchanged
+  } else if (layout == ObsLayout::kProprioChair) {
+    m.obs_scale[51] = -1.0f;  // seat target's y in the torso frame
+    // Relative quaternion (x, y, z, w): a reflection maps (w, x, y, z) to (w, -x, y, -z).
+    m.obs_scale[53] = -1.0f;
+    m.obs_scale[55] = -1.0f;
+  }
+  // Actions in action order: torque max_torque clip(a), or a PD target mid + a half-range.
+  const int nj = model.num_joints();
+  m.act_src.resize(nj);
+  m.act_scale.assign(nj, 1.0f);
+  m.act_offset.assign(nj, 0.0f);
+  for (int j = 0; j < nj; ++j) {
+    const Joint& a = model.joint(j);
+    const Joint& b = model.joint(c[j]);
+    const int dst = b.action_index, src = a.action_index;
+    m.act_src[dst] = src;
+    if (mode == ActionMode::kPd) {
+      const double hr_a = 0.5 * (a.upper - a.lower), hr_b = 0.5 * (b.upper - b.lower);
+      m.act_scale[dst] = static_cast<float>(sign[j] * hr_a / hr_b);
+      m.act_offset[dst] = static_cast<float>((sign[j] * a.mid() - b.mid()) / hr_b);
+    } else {
+      m.act_scale[dst] = static_cast<float>(sign[j] * a.max_torque / b.max_torque);
+    }
+  }
+  return m;
+}
+
+HumanoidState MirrorHumanoidState(const HumanoidState& s, const HumanoidModel& model) {
+  std::vector<int> c;
+  std::vector<double> sign;
+  MirrorJointMap(model, &c, &sign);
+  HumanoidState o = s;
+  o.root_pos.y() = -s.root_pos.y();
+  o.root_quat =
+      Eigen::Quaterniond(s.root_quat.w(), -s.root_quat.x(), s.root_quat.y(), -s.root_quat.z());
+  o.root_lin_vel.y() = -s.root_lin_vel.y();
+  o.root_ang_vel = Eigen::Vector3d(-s.root_ang_vel.x(), s.root_ang_vel.y(), -s.root_ang_vel.z());
+  for (int j = 0; j < model.num_joints(); ++j) {
+    o.q[c[j]] = sign[j] * s.q[j];
+    o.qd[c[j]] = sign[j] * s.qd[j];
+  }
+  return o;
+}
+
 void HumanoidChairEnv::BuildSpec() {
   spec_.name = std::string("humanoid_chair_") + task_->name();
   const ObsLayout layout = config_.obs_layout;
@@ -181,6 +257,7 @@ void HumanoidChairEnv::BuildSpec() {
   spec_.control_dt = config_.physics.physics_dt * config_.physics.substeps;
   spec_.max_episode_steps = task_->max_episode_steps();
   spec_.has_success = task_->has_success();
+  spec_.mirror = BuildMirrorMap(model_, layout, config_.action_mode);
 }
 
 void HumanoidChairEnv::Reset(float* obs) {

@@ -56,6 +56,12 @@ class Task {
 
 std::unique_ptr<Task> MakeTask(const EnvConfig& config);
 
+// The env's left/right symmetry on observations of `layout` and actions (EnvSpec::mirror), from
+// the model's mirrored joints (MirrorJointMap), their limits and their motor strengths.
+MirrorMap BuildMirrorMap(const HumanoidModel& model, ObsLayout layout, ActionMode mode);
+// The mirror image (world y -> -y) of a humanoid state: left and right joints swapped.
+HumanoidState MirrorHumanoidState(const HumanoidState& s, const HumanoidModel& model);
+
 // Everything an episode depends on: the physical state plus the env's own memory.
 struct EnvState {
   WorldState world;

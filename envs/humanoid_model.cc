@@ -1,11 +1,10 @@
 #include "envs/humanoid_model.h"
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <tuple>
-
-#include <Eigen/Eigenvalues>
 
 #include "common/json_util.h"
 #include "common/paths.h"
@@ -58,7 +57,6 @@ Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
   return s;
 }
 
-
 // Transform of one hinge: rotation by angle about axis through anchor.
 Eigen::Isometry3d HingeTransform(const Joint& j, double q) {
   Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
@@ -89,7 +87,8 @@ void GeomMassProperties(const Geom& g, double density, double* mass, Eigen::Vect
   const double ixx = cyl_mass * (h * h / 12.0 + r * r / 4.0) +
                      sphere_mass * (0.4 * r * r + h * h / 4.0 + 3.0 * h * r / 8.0);
   const Eigen::Matrix3d local = Eigen::Vector3d(ixx, ixx, izz).asDiagonal();
-  const Eigen::Matrix3d rot = h > 0.0 ? RotationZTo(seg / h).toRotationMatrix() : Eigen::Matrix3d::Identity();
+  const Eigen::Matrix3d rot =
+      h > 0.0 ? RotationZTo(seg / h).toRotationMatrix() : Eigen::Matrix3d::Identity();
   *inertia = rot * local * rot.transpose();
 }
 
@@ -99,9 +98,8 @@ HumanoidModel HumanoidModel::Load(const std::string& path) {
   const Json root = LoadJsonFile(path);
   const std::string ctx = path;
   CheckKnownKeys(root,
-                 {"_comment", "name", "density", "power_to_torque", "helper_link_mass",
-                  "root_body", "pelvis_body", "foot_bodies", "bodies", "observation_order",
-                  "action_order"},
+                 {"_comment", "name", "density", "power_to_torque", "helper_link_mass", "root_body",
+                  "pelvis_body", "foot_bodies", "bodies", "observation_order", "action_order"},
                  ctx);
   HumanoidModel m;
   GetRequired(root, "name", m.name_, ctx);
@@ -132,7 +130,8 @@ HumanoidModel HumanoidModel::Load(const std::string& path) {
     std::string parent;
     GetRequired(jb, "parent", parent, bctx);
     if (bi == 0) {
-      if (!parent.empty()) throw ConfigError(bctx + ".parent: the first body is the root: use \"\"");
+      if (!parent.empty())
+        throw ConfigError(bctx + ".parent: the first body is the root: use \"\"");
       if (b.name != root_body) {
         throw ConfigError(ctx + ".root_body: '" + root_body + "' must be the first body");
       }
@@ -247,8 +246,8 @@ HumanoidModel HumanoidModel::Load(const std::string& path) {
   // Observation order re-indexes the joints; it must list every joint exactly once.
   const std::string octx = ctx + ".observation_order";
   if (obs_order.size() != file_joints.size()) {
-    throw ConfigError(octx + ": lists " + std::to_string(obs_order.size()) + " joints, the bodies have " +
-                      std::to_string(file_joints.size()));
+    throw ConfigError(octx + ": lists " + std::to_string(obs_order.size()) +
+                      " joints, the bodies have " + std::to_string(file_joints.size()));
   }
   std::vector<int> file_to_obs(file_joints.size(), -1);
   for (size_t i = 0; i < obs_order.size(); ++i) {
@@ -256,14 +255,17 @@ HumanoidModel HumanoidModel::Load(const std::string& path) {
     for (size_t k = 0; k < file_joints.size(); ++k) {
       if (file_joints[k].name == obs_order[i]) found = static_cast<int>(k);
     }
-    if (found < 0) throw ConfigError(octx + "[" + std::to_string(i) + "]: unknown joint '" + obs_order[i] + "'");
-    if (file_to_obs[found] >= 0) throw ConfigError(octx + ": joint '" + obs_order[i] + "' listed twice");
+    if (found < 0)
+      throw ConfigError(octx + "[" + std::to_string(i) + "]: unknown joint '" + obs_order[i] + "'");
+    if (file_to_obs[found] >= 0)
+      throw ConfigError(octx + ": joint '" + obs_order[i] + "' listed twice");
     file_to_obs[found] = static_cast<int>(i);
     m.joints_.push_back(file_joints[found]);
   }
   if (m.num_joints() != kNumJoints) {
-    throw ConfigError(octx + ": the policies and observations assume " + std::to_string(kNumJoints) +
-                      " joints, the file has " + std::to_string(m.num_joints()));
+    throw ConfigError(octx + ": the policies and observations assume " +
+                      std::to_string(kNumJoints) + " joints, the file has " +
+                      std::to_string(m.num_joints()));
   }
   for (Body& b : m.bodies_) {
     for (int& j : b.joints) j = file_to_obs[j];
@@ -275,14 +277,17 @@ HumanoidModel HumanoidModel::Load(const std::string& path) {
   }
   for (size_t a = 0; a < act_order.size(); ++a) {
     const int j = m.FindJoint(act_order[a]);
-    if (j < 0) throw ConfigError(actx + "[" + std::to_string(a) + "]: unknown joint '" + act_order[a] + "'");
-    if (m.joints_[j].action_index >= 0) throw ConfigError(actx + ": joint '" + act_order[a] + "' listed twice");
+    if (j < 0)
+      throw ConfigError(actx + "[" + std::to_string(a) + "]: unknown joint '" + act_order[a] + "'");
+    if (m.joints_[j].action_index >= 0)
+      throw ConfigError(actx + ": joint '" + act_order[a] + "' listed twice");
     m.joints_[j].action_index = static_cast<int>(a);
     m.action_to_joint_.push_back(j);
   }
 
   m.pelvis_body_ = m.FindBody(pelvis_body);
-  if (m.pelvis_body_ < 0) throw ConfigError(ctx + ".pelvis_body: unknown body '" + pelvis_body + "'");
+  if (m.pelvis_body_ < 0)
+    throw ConfigError(ctx + ".pelvis_body: unknown body '" + pelvis_body + "'");
   if (feet.size() != 2) throw ConfigError(ctx + ".foot_bodies: expected [right, left]");
   for (const std::string& f : feet) {
     const int b = m.FindBody(f);
@@ -293,8 +298,8 @@ HumanoidModel HumanoidModel::Load(const std::string& path) {
   m.total_mass_ = 0.0;
   for (const Body& b : m.bodies_) m.total_mass_ += b.mass;
   const std::vector<double> zeros(m.num_joints(), 0.0);
-  const FkResult fk = ForwardKinematics(m, Eigen::Vector3d::Zero(), Eigen::Quaterniond::Identity(),
-                                        zeros.data());
+  const FkResult fk =
+      ForwardKinematics(m, Eigen::Vector3d::Zero(), Eigen::Quaterniond::Identity(), zeros.data());
   m.standing_root_height_ = -LowestGeomZ(m, fk);
   return m;
 }
@@ -377,6 +382,32 @@ Eigen::Vector3d RpyFromQuat(const Eigen::Quaterniond& q) {
   const double roll = std::atan2(r(2, 1), r(2, 2));
   const double yaw = std::atan2(r(1, 0), r(0, 0));
   return Eigen::Vector3d(roll, pitch, yaw);
+}
+
+void MirrorJointMap(const HumanoidModel& model, std::vector<int>* counterpart,
+                    std::vector<double>* sign) {
+  const int n = model.num_joints();
+  counterpart->assign(n, -1);
+  sign->assign(n, 1.0);
+  for (int j = 0; j < n; ++j) {
+    std::string name = model.joint(j).name;
+    if (name.rfind("right_", 0) == 0) {
+      name = "left_" + name.substr(6);
+    } else if (name.rfind("left_", 0) == 0) {
+      name = "right_" + name.substr(5);
+    }
+    const int c = model.FindJoint(name);
+    if (c < 0) throw ConfigError("mirror: joint '" + model.joint(j).name + "' has no counterpart");
+    const Eigen::Vector3d u = model.joint(j).axis;
+    const Eigen::Vector3d mu(u.x(), -u.y(), u.z());
+    const double dot = model.joint(c).axis.normalized().dot(mu.normalized());
+    if (std::abs(std::abs(dot) - 1.0) > 1e-6) {
+      throw ConfigError("mirror: axes of '" + model.joint(j).name + "' and '" + name +
+                        "' are not mirror images");
+    }
+    (*counterpart)[j] = c;
+    (*sign)[j] = dot > 0 ? -1.0 : 1.0;
+  }
 }
 
 }  // namespace perch

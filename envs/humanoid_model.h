@@ -4,16 +4,16 @@
 // Conventions (the authors' MJCF humanoid, notes 1.2-1.3):
 //  * A body's frame is placed at `offset` / `orientation` in its parent's frame; its joints then
 //    apply in file order, each a rotation about `axis` through `anchor` (both in the body frame):
-//      T_world(body) = T_world(parent) * T(offset, orientation) * prod_k [T(a_k) R(u_k, q_k) T(-a_k)].
+//      T_world(body) = T_world(parent) * T(offset, orientation) * prod_k [T(a_k) R(u_k, q_k)
+//      T(-a_k)].
 //  * Joints are indexed in observation order (0..20, notes 1.3); action_to_joint maps an action
 //    index to a joint index (the ankle x/y pairs are swapped, notes 1.4).
 //  * Angles in radians (the file holds degrees), lengths in metres, masses in kg.
 #pragma once
 
+#include <Eigen/Geometry>
 #include <string>
 #include <vector>
-
-#include <Eigen/Geometry>
 
 namespace perch {
 
@@ -22,20 +22,20 @@ struct Geom {
   Type type = Type::kSphere;
   Eigen::Vector3d from = Eigen::Vector3d::Zero();  // capsule segment start; sphere centre [m]
   Eigen::Vector3d to = Eigen::Vector3d::Zero();    // capsule segment end; = from for a sphere [m]
-  double radius = 0.0;                              // [m]
+  double radius = 0.0;                             // [m]
 };
 
 struct Joint {
   std::string name;
-  int body = -1;                                   // index of the body this hinge moves
-  Eigen::Vector3d axis = Eigen::Vector3d::UnitX();  // unit, in the body frame
+  int body = -1;                                     // index of the body this hinge moves
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitX();   // unit, in the body frame
   Eigen::Vector3d anchor = Eigen::Vector3d::Zero();  // in the body frame [m]
-  double lower = 0.0, upper = 0.0;                 // range [rad]
-  double power = 0.0;                              // the authors' motor power (unitless)
-  double max_torque = 0.0;                         // = power_to_torque * power [N m]
-  double kp = 0.0;                                 // PD stiffness [N m / rad]
-  double kd = 0.0;                                 // PD damping [N m s / rad]
-  int action_index = -1;                           // where this joint's command sits in actions
+  double lower = 0.0, upper = 0.0;                   // range [rad]
+  double power = 0.0;                                // the authors' motor power (unitless)
+  double max_torque = 0.0;                           // = power_to_torque * power [N m]
+  double kp = 0.0;                                   // PD stiffness [N m / rad]
+  double kd = 0.0;                                   // PD damping [N m s / rad]
+  int action_index = -1;                             // where this joint's command sits in actions
 
   double mid() const { return 0.5 * (lower + upper); }
   // q_n = 2 (q - mid) / (hi - lo): in [-1, 1] inside the limits (notes 1.5).
@@ -44,14 +44,14 @@ struct Joint {
 
 struct Body {
   std::string name;
-  int parent = -1;  // -1 for the root (torso)
-  Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // in the parent frame [m]
+  int parent = -1;                                                  // -1 for the root (torso)
+  Eigen::Vector3d offset = Eigen::Vector3d::Zero();                 // in the parent frame [m]
   Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();  // relative to the parent
-  std::vector<Geom> geoms;  // in the body frame
-  std::vector<int> joints;  // joint indices, in application (file) order
-  double mass = 0.0;        // [kg]
-  Eigen::Vector3d com = Eigen::Vector3d::Zero();        // centre of mass, body frame [m]
-  Eigen::Matrix3d inertia = Eigen::Matrix3d::Zero();    // about the com, body frame [kg m^2]
+  std::vector<Geom> geoms;                                          // in the body frame
+  std::vector<int> joints;                            // joint indices, in application (file) order
+  double mass = 0.0;                                  // [kg]
+  Eigen::Vector3d com = Eigen::Vector3d::Zero();      // centre of mass, body frame [m]
+  Eigen::Matrix3d inertia = Eigen::Matrix3d::Zero();  // about the com, body frame [kg m^2]
   // Principal axes: inertia = principal_rot * diag(principal_inertia) * principal_rot^T.
   Eigen::Matrix3d principal_rot = Eigen::Matrix3d::Identity();  // det +1
   Eigen::Vector3d principal_inertia = Eigen::Vector3d::Zero();  // [kg m^2]
@@ -103,7 +103,7 @@ class HumanoidModel {
 };
 
 struct FkResult {
-  std::vector<Eigen::Isometry3d> body_world;      // [num_bodies] world pose of each body frame
+  std::vector<Eigen::Isometry3d> body_world;        // [num_bodies] world pose of each body frame
   std::vector<Eigen::Vector3d> joint_anchor_world;  // [num_joints] world anchor, obs order [m]
 };
 
@@ -126,5 +126,10 @@ Eigen::Quaterniond RotationZTo(const Eigen::Vector3d& d);
 // the given density [kg/m^3]. Capsule = cylinder + two hemispheres (as Bullet's MJCF importer).
 void GeomMassProperties(const Geom& g, double density, double* mass, Eigen::Vector3d* com,
                         Eigen::Matrix3d* inertia);
+
+// For each joint, its mirror counterpart and the sign of the mapping q' = sign * q (from the
+// joint axes: a reflection maps a rotation about u by q to one about -M u by q).
+void MirrorJointMap(const HumanoidModel& model, std::vector<int>* counterpart,
+                    std::vector<double>* sign);
 
 }  // namespace perch

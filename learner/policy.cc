@@ -477,6 +477,79 @@ proto::ModelWeights WidenMetaChoices(const proto::ModelWeights& w, const PolicyC
   return out;
 }
 
+proto::ModelWeights MirrorModelWeights(const proto::ModelWeights& w, const MirrorMap& m,
+                                       const std::string& ctx) {
+  const PolicyConfig c = PolicyConfigFromShape(w.shape(), ctx);
+  if (c.kind != PolicyKind::kGaussian) {
+    throw ConfigError(ctx + ": only a Gaussian (subtask) policy can be mirrored");
+  }
+  const ActorCritic net(c, 0);
+  if (w.params_size() != net.num_params()) {
+    throw ConfigError(ctx + ": params has " + std::to_string(w.params_size()) +
+                      " values, its shape needs " + std::to_string(net.num_params()));
+  }
+  auto check = [&](const std::vector<int>& src, const std::vector<float>& scale,
+                   const std::vector<float>& offset, int n, const char* what) {
+    if (static_cast<int>(src.size()) != n || static_cast<int>(scale.size()) != n ||
+        static_cast<int>(offset.size()) != n) {
+      throw ConfigError(ctx + ": the env's mirror map has " + std::to_string(src.size()) + " " +
+                        what + " entries, the policy " + std::to_string(n));
+    }
+    std::vector<bool> used(n, false);
+    for (int i = 0; i < n; ++i) {
+      if (src[i] < 0 || src[i] >= n || used[src[i]] || scale[i] == 0.0f) {
+        throw ConfigError(ctx + ": the env's mirror map of " + what +
+                          " is not a signed "
+                          "permutation at " +
+                          std::to_string(i));
+      }
+      used[src[i]] = true;
+    }
+  };
+  const int od = c.obs_dim, ad = c.act_dim;
+  if (m.empty()) throw ConfigError(ctx + ": the env has no mirror map");
+  check(m.obs_src, m.obs_scale, m.obs_offset, od, "observation");
+  check(m.act_src, m.act_scale, m.act_offset, ad, "action");
+  const float* sp = w.params().data();
+  std::vector<float> dp(sp, sp + net.num_params());
+  // First layers: the original reads x_i = a_i o_p(i) + b_i; normalised, that is
+  // sign(a_i) (o_p(i) - mean'_p(i)) / std'_p(i), so column i moves to p(i) with sign(a_i).
+  auto mirror_inputs = [&](const Mlp& mlp, int off) {
+    const int h = mlp.sizes()[1];
+    for (int i = 0; i < od; ++i) {
+      const float sg = m.obs_scale[i] > 0 ? 1.0f : -1.0f;
+      for (int r = 0; r < h; ++r) dp[off + m.obs_src[i] * h + r] = sg * sp[off + i * h + r];
+    }
+  };
+  mirror_inputs(net.policy_mlp(), 0);
+  mirror_inputs(net.value_mlp(), net.value_offset());
+  // Mean head (the last layer, linear): row k = s_k row q(k), bias s_k b_q(k) + t_k.
+  const std::vector<int>& sizes = net.policy_mlp().sizes();
+  const int h = sizes[sizes.size() - 2];
+  int last = 0;
+  for (size_t l = 0; l + 2 < sizes.size(); ++l) last += sizes[l + 1] * sizes[l] + sizes[l + 1];
+  for (int k = 0; k < ad; ++k) {
+    const int q = m.act_src[k];
+    const float sk = m.act_scale[k];
+    for (int col = 0; col < h; ++col) dp[last + col * ad + k] = sk * sp[last + col * ad + q];
+    dp[last + h * ad + k] = sk * sp[last + h * ad + q] + m.act_offset[k];
+    dp[net.log_std_offset() + k] = sp[net.log_std_offset() + q] + std::log(std::abs(sk));
+  }
+  proto::ModelWeights out = w;
+  out.mutable_params()->Assign(dp.begin(), dp.end());
+  if (w.obs_stats().mean_size() == od && w.obs_stats().var_size() == od) {
+    const double eps = w.obs_eps();
+    proto::RunningStats* st = out.mutable_obs_stats();
+    for (int i = 0; i < od; ++i) {
+      const double a = m.obs_scale[i];
+      st->set_mean(m.obs_src[i], (w.obs_stats().mean(i) - m.obs_offset[i]) / a);
+      // (var' + eps) = (var + eps) / a^2: the same standard deviation in the normaliser.
+      st->set_var(m.obs_src[i], std::max(0.0, (w.obs_stats().var(i) + eps) / (a * a) - eps));
+    }
+  }
+  return out;
+}
+
 proto::ModelWeights ConvertStdMode(const proto::ModelWeights& w, const PolicyConfig& mine,
                                    const std::string& ctx) {
   proto::ModelWeights out = w;

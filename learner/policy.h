@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "common/env.h"
 #include "common/json_util.h"
 #include "common/rng.h"
 #include "learner/mlp.h"
@@ -155,6 +156,15 @@ proto::ModelWeights DropTrailingInputs(const proto::ModelWeights& w, int obs_dim
 // observes more, e.g. sit_chair.meta.observe_active, starts from one that did not).
 proto::ModelWeights AppendZeroInputs(const proto::ModelWeights& w, int obs_dim,
                                      const std::string& ctx);
+
+// The policy of the mirror-image task (turn right from turn left, MirrorMap in common/env.h):
+// pi'(o) = M_act(pi(M_obs(o))) and V'(o) = V(M_obs(o)) exactly, by permuting and signing both
+// networks' input columns, moving the observation statistics (mean, var) to where the mirrored
+// inputs come from, and permuting, scaling and shifting the mean head's rows and the log-std.
+// ConfigError naming ctx for a meta policy, sizes that differ from the map, or a map that is not
+// a signed permutation (a source used twice, a zero scale).
+proto::ModelWeights MirrorModelWeights(const proto::ModelWeights& w, const MirrorMap& m,
+                                       const std::string& ctx);
 
 // `w` with the std mode of `mine` (a fine-tune that freezes or frees sigma): into a fixed-sigma
 // network the log-std becomes mine.init_log_std for every action dimension (what fixed means);

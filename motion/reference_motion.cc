@@ -141,32 +141,6 @@ MotionPose ReferenceMotion::At(double t) const {
   return Shift(o, k, cycle_disp_, cycle_yaw_);
 }
 
-void MirrorJointMap(const HumanoidModel& model, std::vector<int>* counterpart,
-                    std::vector<double>* sign) {
-  const int n = model.num_joints();
-  counterpart->assign(n, -1);
-  sign->assign(n, 1.0);
-  for (int j = 0; j < n; ++j) {
-    std::string name = model.joint(j).name;
-    if (name.rfind("right_", 0) == 0) {
-      name = "left_" + name.substr(6);
-    } else if (name.rfind("left_", 0) == 0) {
-      name = "right_" + name.substr(5);
-    }
-    const int c = model.FindJoint(name);
-    if (c < 0) throw ConfigError("mirror: joint '" + model.joint(j).name + "' has no counterpart");
-    const Eigen::Vector3d u = model.joint(j).axis;
-    const Eigen::Vector3d mu(u.x(), -u.y(), u.z());
-    const double dot = model.joint(c).axis.normalized().dot(mu.normalized());
-    if (std::abs(std::abs(dot) - 1.0) > 1e-6) {
-      throw ConfigError("mirror: axes of '" + model.joint(j).name + "' and '" + name +
-                        "' are not mirror images");
-    }
-    (*counterpart)[j] = c;
-    (*sign)[j] = dot > 0 ? -1.0 : 1.0;
-  }
-}
-
 MotionPose ReferenceMotion::MirrorPose(const MotionPose& p, const HumanoidModel& model) {
   std::vector<int> c;
   std::vector<double> s;

@@ -89,9 +89,4 @@ class ReferenceMotion {
   Json meta_ = Json::object();
 };
 
-// For each joint, its mirror counterpart and the sign of the mapping q' = sign * q (from the
-// joint axes: a reflection maps a rotation about u by q to one about -M u by q).
-void MirrorJointMap(const HumanoidModel& model, std::vector<int>* counterpart,
-                    std::vector<double>* sign);
-
 }  // namespace perch

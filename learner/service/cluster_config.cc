@@ -27,6 +27,7 @@ Json ToJson(const ClusterConfig& c) {
               {"learner_watchdog_s", c.learner_watchdog_s},
               {"learner_queue_segments", c.learner_queue_segments},
               {"init_from", c.init_from},
+              {"init_mirror", c.init_mirror},
               {"max_samples", c.max_samples},
               {"target_success", c.target_success},
               {"target_window", c.target_window},
@@ -72,6 +73,7 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
                   "learner_watchdog_s",
                   "learner_queue_segments",
                   "init_from",
+                  "init_mirror",
                   "max_samples",
                   "target_success",
                   "target_window",
@@ -106,6 +108,7 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "learner_watchdog_s", c.learner_watchdog_s, ctx);
   GetOptional(j, "learner_queue_segments", c.learner_queue_segments, ctx);
   GetOptional(j, "init_from", c.init_from, ctx);
+  GetOptional(j, "init_mirror", c.init_mirror, ctx);
   GetOptional(j, "max_samples", c.max_samples, ctx);
   GetOptional(j, "target_success", c.target_success, ctx);
   GetOptional(j, "target_window", c.target_window, ctx);
@@ -144,6 +147,9 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
   CheckMin(ctx, "max_identical_failures", c.max_identical_failures, 0);
   CheckMin(ctx, "learner_watchdog_s", c.learner_watchdog_s, 0);
   CheckMin(ctx, "learner_queue_segments", c.learner_queue_segments, 1);
+  if (c.init_mirror && c.init_from.empty()) {
+    throw ConfigError(ctx + ".init_mirror: needs cluster.init_from (the policy to mirror)");
+  }
   if (c.max_samples < 0) throw ConfigError(ctx + ".max_samples: must be >= 0 (0: no budget)");
   if (!(c.target_success >= 0.0 && c.target_success <= 1.0)) {
     throw ConfigError(ctx + ".target_success: must be in [0, 1] (0: no target)");

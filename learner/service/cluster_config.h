@@ -44,6 +44,10 @@ struct ClusterConfig {
   // normalizer: fine-tuning, e.g. walk stage 2 from stage 1 (notes §8.2 "init"). Adam, reward
   // scaling and counters start fresh. Empty: from scratch. Relative paths: the project root.
   std::string init_from;
+  // init_from is a policy of the mirror-image task (ours): its weights are mirrored left/right
+  // through the env's spec (EnvSpec::mirror, MirrorModelWeights), e.g. a right turn that starts
+  // as the left turn's mirror image.
+  bool init_mirror = false;
   // A run ends by itself (final checkpoint, summary) once trained on max_samples env steps (0: no
   // budget; the console then shows percent done and an ETA), or once the success rate over the
   // newest target_window judged episodes reaches target_success (0: no target; tasks with a

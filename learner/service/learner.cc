@@ -375,6 +375,13 @@ void ApplyInitFrom(const LearnerSetup& setup, PpoLearner* ppo) {
                  ctx, w.shape().obs_dim(), mine.obs_dim);
     w = DropTrailingInputs(w, mine.obs_dim, ctx);
   }
+  if (setup.cluster.init_mirror) {
+    if (setup.mirror.empty()) {
+      throw ConfigError(ctx + ": cluster.init_mirror: this run's env has no left/right mirror map");
+    }
+    spdlog::info("learner: {}: mirrored left/right (cluster.init_mirror)", ctx);
+    w = MirrorModelWeights(w, setup.mirror, ctx);
+  }
   // A meta controller that observes more (observe_active) starts from one that did not.
   if (w.shape().kind() == "meta" && mine.kind == PolicyKind::kMeta &&
       w.shape().obs_dim() < mine.obs_dim) {

@@ -37,6 +37,7 @@ struct LearnerSetup {
   Json resolved_config;     // the whole experiment config, saved into the run dir and checkpoints
   std::string compat_key;   // must match a checkpoint to resume from it
   double control_dt = 0.0;  // [s] per env step, for the console (0: lengths in steps)
+  MirrorMap mirror;         // the env's left/right symmetry (cluster.init_mirror)
   // Policies the env runs frozen inside its step (meta: the subtasks), frozen = true. Shipped
   // with the first weights and to every (re)subscribing actor; kept in checkpoints, and a
   // resumed run keeps the checkpoint's.

@@ -442,6 +442,10 @@ TEST(InprocTest, InitFromRefusesMissingCorruptOrMismatchedCheckpoints) {
   }
   expect_refused(Json{{"init_from", corrupt}}, "corrupt", "ckpt.bin");
   expect_refused(Json{{"init_from", src_ckpt}}, "shape", "ckpt-0000000002.bin");
+  // Mirroring needs an env with a left/right symmetry (the mock env has none) and a source.
+  expect_refused(Json{{"init_from", src_ckpt}, {"init_mirror", true}}, "mirror", "mirror map");
+  EXPECT_THROW(ExperimentConfigFromJson(MockConfig(Json{{"init_mirror", true}}), "nosrc"),
+               ConfigError);
   // The source run is untouched.
   EXPECT_EQ(ReadCheckpointFile(src_ckpt).counters().updates(), 2u);
 }

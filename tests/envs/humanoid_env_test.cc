@@ -213,6 +213,90 @@ TEST(HumanoidEnv, ObservationInvariantToHorizontalSceneTransform) {
   }
 }
 
+// The spec's mirror map is the env's own left/right symmetry: the mirror image of a state observes
+// M_obs(obs), and it moves as the original does when driven by M_act(action).
+TEST(HumanoidEnv, MirrorMapIsTheEnvsLeftRightSymmetry) {
+  for (ObsLayout layout : {ObsLayout::kProprioGoal, ObsLayout::kProprioChair}) {
+    for (ActionMode mode : {ActionMode::kTorque, ActionMode::kPd}) {
+      EnvConfig a;
+      a.action_mode = mode;
+      a.obs_layout = layout;
+      a.obs.foot_contact_lag = false;
+      a.stand.walk_target = {2.0, 1.0};
+      EnvConfig b = a;
+      b.stand.walk_target = {2.0, -1.0};
+      HumanoidChairEnv ea(a), eb(b);
+      const MirrorMap& m = ea.spec().mirror;
+      const int n = ea.spec().obs_dim;
+      ASSERT_EQ(static_cast<int>(m.obs_src.size()), n);
+      ASSERT_EQ(m.act_src.size(), 21u);
+      // Mirroring twice is the identity. The authors' humanoid mirrors exactly (signs only)
+      // except in the hip flexion limits (right -110..20 deg, left -120..20, as in MuJoCo's
+      // humanoid), which the normalised angles' scale and offset absorb.
+      const int hip_y = ea.model().FindJoint("right_hip_y");
+      const int lhip_y = ea.model().FindJoint("left_hip_y");
+      for (int i = 0; i < n; ++i) {
+        const int j = m.obs_src[i];
+        EXPECT_EQ(m.obs_src[j], i) << i;
+        EXPECT_NEAR(m.obs_scale[i] * m.obs_scale[j], 1.0f, 1e-6) << i;
+        EXPECT_NEAR(m.obs_scale[i] * m.obs_offset[j] + m.obs_offset[i], 0.0f, 1e-6) << i;
+        if (i != kJoints + 2 * hip_y && i != kJoints + 2 * lhip_y) {
+          EXPECT_EQ(std::abs(m.obs_scale[i]), 1.0f) << i;
+          EXPECT_NEAR(m.obs_offset[i], 0.0f, 1e-6) << i;
+        }
+      }
+      for (int i = 0; i < 21; ++i) {
+        const int j = m.act_src[i];
+        EXPECT_EQ(m.act_src[j], i) << i;
+        EXPECT_NEAR(m.act_scale[i] * m.act_scale[j], 1.0f, 1e-6) << i;
+        // Only the abdomen's joints are their own mirror images.
+        const std::string& name = ea.model().joint(ea.model().action_to_joint()[i]).name;
+        EXPECT_EQ(j == i, name.rfind("abdomen", 0) == 0) << name;
+        if (mode == ActionMode::kTorque) EXPECT_EQ(std::abs(m.act_scale[i]), 1.0f) << i;
+      }
+      auto mirrored = [&](const std::vector<float>& o) {
+        std::vector<float> r(o.size());
+        for (int i = 0; i < n; ++i) r[i] = m.obs_scale[i] * o[m.obs_src[i]] + m.obs_offset[i];
+        return r;
+      };
+      HumanoidState s = StandingPose(ea.model(), 0.01);
+      s.root_pos = Eigen::Vector3d(1.2, 0.4, s.root_pos.z() + 1.0);  // in the air: no contacts
+      s.root_quat = QuatFromRpy(0.05, 0.1, 2.5);
+      s.root_lin_vel = Eigen::Vector3d(0.5, -0.3, 0.1);
+      s.root_ang_vel = Eigen::Vector3d(0.1, 0.2, -0.3);
+      s.q[ea.model().FindJoint("right_knee")] = -0.7;
+      s.q[ea.model().FindJoint("left_hip_x")] = 0.2;
+      s.qd[ea.model().FindJoint("right_shoulder1")] = 1.5;
+      std::vector<float> oa(n), ob(n), act(21), mact(21);
+      ea.ResetToState(s, oa.data());
+      eb.ResetToState(MirrorHumanoidState(s, ea.model()), ob.data());
+      std::vector<float> want = mirrored(oa);
+      for (int i = 0; i < n; ++i) EXPECT_NEAR(ob[i], want[i], 1e-4) << "reset, index " << i;
+      Rng rng(3);
+      for (int step = 0; step < 10; ++step) {
+        for (float& v : act) v = static_cast<float>(rng.Uniform(-1, 1));
+        for (int i = 0; i < 21; ++i) mact[i] = m.act_scale[i] * act[m.act_src[i]] + m.act_offset[i];
+        ea.Step(act.data(), oa.data());
+        eb.Step(mact.data(), ob.data());
+      }
+      want = mirrored(oa);
+      for (int i = 0; i < n; ++i) EXPECT_NEAR(ob[i], want[i], 1e-3) << "air, index " << i;
+      // A wrong action map (actions not mirrored) moves the mirror image elsewhere.
+      ea.ResetToState(s, oa.data());
+      eb.ResetToState(MirrorHumanoidState(s, ea.model()), ob.data());
+      for (int step = 0; step < 10; ++step) {
+        ea.Step(act.data(), oa.data());
+        eb.Step(act.data(), ob.data());
+      }
+      want = mirrored(oa);
+      double diff = 0;
+      for (int i = 0; i < n; ++i)
+        diff = std::max(diff, static_cast<double>(std::abs(ob[i] - want[i])));
+      EXPECT_GT(diff, 0.05);
+    }
+  }
+}
+
 // Random actions from a seeded stream.
 std::vector<std::vector<float>> Trajectory(uint64_t seed, int steps, EnvConfig c) {
   c.spawn.zone = 1;

@@ -432,3 +432,88 @@ TEST(WidenMetaChoices, KeepsTargetHeadAndValueAndStartsTheSwitchAnew) {
 
 }  // namespace
 }  // namespace perch
+
+namespace perch {
+namespace {
+
+// The mirror-image task's policy acts as M_act(pi(M_obs(o))) and values as V(M_obs(o)), for any
+// signed, scaled, shifted permutation of inputs and actions (the normaliser statistics included).
+TEST(MirrorModelWeights, ActsAsTheSourceOnTheMirroredObservation) {
+  PpoLearner learner(PolicyConfig::Subtask(52), PpoConfig::Subtask(), 17);
+  proto::ModelWeights w;
+  learner.ExportWeights(&w);
+  Rng rng(21);
+  for (int i = 0; i < w.params_size(); ++i) w.set_params(i, static_cast<float>(rng.Normal() * 0.3));
+  proto::RunningStats* st = w.mutable_obs_stats();
+  st->set_count(100.0);
+  st->clear_mean();
+  st->clear_var();
+  for (int i = 0; i < 52; ++i) {
+    st->add_mean(rng.Uniform(-1.0, 1.0));
+    st->add_var(rng.Uniform(0.5, 2.0));
+  }
+  auto perm = [&](int n) {
+    std::vector<int> p(n);
+    for (int i = 0; i < n; ++i) p[i] = i;
+    for (int i = n - 1; i > 0; --i) std::swap(p[i], p[rng.UniformInt(i + 1)]);
+    return p;
+  };
+  auto scale = [&](int n) {
+    std::vector<float> v(n);
+    for (float& x : v)
+      x = static_cast<float>((rng.Uniform(0, 1) < 0.5 ? -1 : 1) * rng.Uniform(0.5, 2));
+    return v;
+  };
+  auto offset = [&](int n) {
+    std::vector<float> v(n);
+    for (float& x : v) x = static_cast<float>(rng.Uniform(-0.5, 0.5));
+    return v;
+  };
+  MirrorMap m;
+  m.obs_src = perm(52);
+  m.obs_scale = scale(52);
+  m.obs_offset = offset(52);
+  m.act_src = perm(21);
+  m.act_scale = scale(21);
+  m.act_offset = offset(21);
+  const proto::ModelWeights mw = MirrorModelWeights(w, m, "test");
+  PolicyRunner src(PolicyConfigFromShape(w.shape(), "w"), NormalizerConfig());
+  PolicyRunner dst(PolicyConfigFromShape(mw.shape(), "m"), NormalizerConfig());
+  src.LoadWeights(w);
+  dst.LoadWeights(mw);
+  src.set_update_obs_stats(false);
+  dst.set_update_obs_stats(false);
+  for (int trial = 0; trial < 5; ++trial) {
+    std::vector<float> o(52), mo(52), a(21), b(21);
+    for (float& v : o) v = static_cast<float>(rng.Normal());
+    for (int i = 0; i < 52; ++i) mo[i] = m.obs_scale[i] * o[m.obs_src[i]] + m.obs_offset[i];
+    const auto os = src.Act(mo.data(), rng, true, nullptr, a.data());
+    const auto od = dst.Act(o.data(), rng, true, nullptr, b.data());
+    for (int k = 0; k < 21; ++k) {
+      EXPECT_NEAR(b[k], m.act_scale[k] * a[m.act_src[k]] + m.act_offset[k], 1e-4) << k;
+    }
+    EXPECT_NEAR(od.value, os.value, 1e-4);
+  }
+  // sigma follows its action, scaled.
+  const ActorCritic net(PolicyConfigFromShape(w.shape(), "w"), 0);
+  for (int k = 0; k < 21; ++k) {
+    EXPECT_NEAR(mw.params(net.log_std_offset() + k),
+                w.params(net.log_std_offset() + m.act_src[k]) + std::log(std::abs(m.act_scale[k])),
+                1e-5);
+  }
+  // Refused: no map, a source used twice, a zero scale, a meta policy.
+  EXPECT_THROW(MirrorModelWeights(w, MirrorMap(), "t"), ConfigError);
+  MirrorMap dup = m;
+  dup.obs_src[1] = dup.obs_src[0];
+  EXPECT_THROW(MirrorModelWeights(w, dup, "t"), ConfigError);
+  MirrorMap zero = m;
+  zero.act_scale[3] = 0.0f;
+  EXPECT_THROW(MirrorModelWeights(w, zero, "t"), ConfigError);
+  PpoLearner meta(PolicyConfig::Meta(52), PpoConfig::Meta(), 1);
+  proto::ModelWeights mwm;
+  meta.ExportWeights(&mwm);
+  EXPECT_THROW(MirrorModelWeights(mwm, m, "t"), ConfigError);
+}
+
+}  // namespace
+}  // namespace perch
