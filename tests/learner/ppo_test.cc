@@ -78,9 +78,9 @@ TEST(PpoUpdateTest, GlobalGradientClipIsApplied) {
   EXPECT_GT(moved[1].cwiseAbs().maxCoeff(), 1e-4f);
 }
 
-// ppo.threads (issue 20): 2 or 3 threads run the policy and the value network of each minibatch
-// side by side, which is the one-thread arithmetic exactly; 4 or more also split the minibatch,
-// which differs from one thread only in summation order; any count gives the same bits every run.
+// ppo.threads (issue 20): each minibatch is split into one part per thread, which differs from one
+// thread only in the summation order of the parts' gradients; any count gives the same bits every
+// run.
 TEST(PpoUpdateTest, ThreadsMatchOneThread) {
   auto run = [](int threads, UpdateStats* st) {
     PpoConfig cfg;
