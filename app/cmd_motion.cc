@@ -5,9 +5,9 @@
 #include <iostream>
 #include <map>
 
-#include "common/paths.h"
 #include "app/commands.h"
 #include "common/json_util.h"
+#include "common/paths.h"
 #include "envs/humanoid_env.h"
 #include "envs/humanoid_model.h"
 #include "motion/bvh.h"
@@ -111,7 +111,8 @@ void RunCheck(const RetargetArgs& a) {
     const BvhClip bvh = ReadBvhFile(FindBvh(a, src));
     std::cerr << "check " << spec.name << " (" << src << ")\n";
     Json stats = EvaluateMotion(m, TargetsForMotion(m, bvh, model, cfg), model, cfg);
-    if (a.compare) stats["compare_reference"] = CompareWithReference(m, ResolveProjectPath(a.reference_dir));
+    if (a.compare)
+      stats["compare_reference"] = CompareWithReference(m, ResolveProjectPath(a.reference_dir));
     report.push_back(stats);
   }
   if (a.json) {
@@ -249,9 +250,38 @@ void RegisterMotionCommands(CLI::App& root, CLI::App& bench) {
   ex->add_option("--seconds", e->seconds, "how long (default: the clip; a loop can run longer)");
   ex->callback([e] {
     const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
-    const ReferenceMotion m = ReferenceMotion::Load(ResolveProjectPath(e->motions) + "/" + e->name + ".json");
+    const ReferenceMotion m =
+        ReferenceMotion::Load(ResolveProjectPath(e->motions) + "/" + e->name + ".json");
     SaveBvhFile(e->out, HumanoidMotionToBvh(model, m, m.frame_time(), e->seconds));
     std::cerr << "wrote " << e->out << "\n";
+  });
+  struct StraightenArgs {
+    std::string name, out;
+    std::string motions = "data/motions";
+    double deg = 20.0, t0 = 1.4, t1 = 2.2;
+  };
+  auto st = std::make_shared<StraightenArgs>();
+  CLI::App* sg = motion->add_subcommand(
+      "straighten",
+      "Write a clip that sits up straighter: pelvis and legs rotated forward against the torso "
+      "(abdomen_y + DEG, hip_y - DEG), the pelvis kept in place");
+  sg->add_option("name", st->name, "clip name (data/motions/NAME.json)")->required();
+  sg->add_option("out", st->out, "output clip JSON (must not exist)")->required();
+  sg->add_option("--motions", st->motions, "directory of the clips");
+  sg->add_option("--deg", st->deg, "abdomen extension at the end of the ramp [deg]")
+      ->capture_default_str()
+      ->check(CLI::Range(-60.0, 60.0));
+  sg->add_option("--from-s", st->t0, "ramp start [s]")->capture_default_str();
+  sg->add_option("--to-s", st->t1, "ramp end [s]; held after")->capture_default_str();
+  sg->callback([st] {
+    if (std::filesystem::exists(st->out)) throw ConfigError(st->out + ": exists; not overwritten");
+    const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
+    ReferenceMotion m =
+        ReferenceMotion::Load(ResolveProjectPath(st->motions) + "/" + st->name + ".json");
+    ReferenceMotion out = m.Straightened(model, st->deg, st->t0, st->t1);
+    out.set_name(std::filesystem::path(st->out).stem().string());
+    out.Save(st->out);
+    std::cerr << "wrote " << st->out << "\n";
   });
   struct BenchArgs {
     std::string bvh = "../shared/mocap/08_01.bvh";

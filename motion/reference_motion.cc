@@ -1,5 +1,6 @@
 #include "motion/reference_motion.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -155,6 +156,39 @@ MotionPose ReferenceMotion::MirrorPose(const MotionPose& p, const HumanoidModel&
     if (p.qdot.size() == p.q.size()) o.qdot[c[j]] = s[j] * p.qdot[j];
   }
   return o;
+}
+
+ReferenceMotion ReferenceMotion::Straightened(const HumanoidModel& model, double deg, double t0,
+                                              double t1) const {
+  const int ay = model.FindJoint("abdomen_y");
+  const int rh = model.FindJoint("right_hip_y");
+  const int lh = model.FindJoint("left_hip_y");
+  if (ay < 0 || rh < 0 || lh < 0) {
+    throw ConfigError("straighten: the humanoid needs abdomen_y, right_hip_y and left_hip_y");
+  }
+  if (!(t1 > t0)) throw ConfigError("straighten: the ramp must end after it starts (t1 > t0)");
+  const int pelvis = model.pelvis_body();
+  ReferenceMotion m = *this;
+  for (int i = 0; i < num_frames(); ++i) {
+    const double t = i * frame_time_;
+    const double a = deg * M_PI / 180.0 * std::clamp((t - t0) / (t1 - t0), 0.0, 1.0);
+    MotionPose& f = m.frames_[i];
+    const Eigen::Vector3d before = ForwardKinematics(model, f.root_pos, f.root_rot, f.q.data())
+                                       .body_world[pelvis]
+                                       .translation();
+    f.q[ay] += a;
+    f.q[rh] -= a;
+    f.q[lh] -= a;
+    const Eigen::Vector3d after = ForwardKinematics(model, f.root_pos, f.root_rot, f.q.data())
+                                      .body_world[pelvis]
+                                      .translation();
+    f.root_pos += before - after;
+  }
+  m.ComputeVelocities();
+  if (m.meta_.is_object()) {
+    m.meta_["straightened"] = {{"abdomen_y_deg", deg}, {"ramp_s", {t0, t1}}};
+  }
+  return m;
 }
 
 ReferenceMotion ReferenceMotion::Mirrored(const HumanoidModel& model) const {

@@ -65,6 +65,12 @@ class ReferenceMotion {
   // flips signs from the joint axes. Mirroring twice gives the original motion.
   ReferenceMotion Mirrored(const HumanoidModel& model) const;
   static MotionPose MirrorPose(const MotionPose& p, const HumanoidModel& model);
+  // Sitting up straighter (ours, for the sit clip): the pelvis and legs rotated forward against the
+  // torso by deg(t) about the abdomen's flexion joint (abdomen_y + deg, both hip_y - deg, so the
+  // thighs keep their direction), the torso keeping its orientation, and the root moved so the
+  // pelvis stays where it was. deg(t) ramps linearly from 0 at t0 to `deg` at t1 [s] and holds.
+  // Velocities recomputed. ConfigError when the model lacks those joints or t1 <= t0.
+  ReferenceMotion Straightened(const HumanoidModel& model, double deg, double t0, double t1) const;
 
   // Metadata carried with the file (source clip, frame range, acknowledgement, measurements).
   Json& meta() { return meta_; }

@@ -178,5 +178,56 @@ TEST(Mirror, TwiceIsTheIdentity) {
   EXPECT_DOUBLE_EQ(twice.cycle_yaw(), m.cycle_yaw());
 }
 
+// The straightened sit clip keeps the pelvis and the feet where they were and the torso's
+// orientation, and moves the back forward of where the slouched clip had it: placed at the
+// authors' seat target, the original's torso and lower waist reach 14-15 cm behind the pelvis,
+// through the backrest 10.4 cm behind it.
+TEST(Straightened, KeepsPelvisFeetAndTorsoAndClearsTheBack) {
+  const ReferenceMotion m =
+      ReferenceMotion::Load(std::string(PERCH_SOURCE_DIR) + "/data/motions/sit.json");
+  const double t0 = 1.4, t1 = 2.2;
+  const ReferenceMotion s = m.Straightened(Model(), 20.0, t0, t1);
+  ASSERT_EQ(s.num_frames(), m.num_frames());
+  const int pelvis = Model().pelvis_body();
+  const int ay = Model().FindJoint("abdomen_y");
+  const int feet[2] = {Model().FindBody("right_foot"), Model().FindBody("left_foot")};
+  auto behind = [&](const FkResult& fk, const char* body) {  // most negative x rel. the pelvis
+    const int b = Model().FindBody(body);
+    double x = 1e9;
+    for (const Geom& g : Model().body(b).geoms) {
+      for (double a = 0; a <= 1.0; a += 0.05) {
+        x = std::min(x, (fk.body_world[b] * (g.from + a * (g.to - g.from))).x() - g.radius);
+      }
+    }
+    return x - fk.body_world[pelvis].translation().x();
+  };
+  for (int i = 0; i < m.num_frames(); ++i) {
+    const MotionPose& a = m.frame(i);
+    const MotionPose& b = s.frame(i);
+    const FkResult fa = ForwardKinematics(Model(), a.root_pos, a.root_rot, a.q.data());
+    const FkResult fb = ForwardKinematics(Model(), b.root_pos, b.root_rot, b.q.data());
+    EXPECT_LT((fa.body_world[pelvis].translation() - fb.body_world[pelvis].translation()).norm(),
+              1e-9)
+        << i;
+    EXPECT_LT(a.root_rot.angularDistance(b.root_rot), 1e-9) << i;
+    const double want =
+        20.0 * M_PI / 180.0 * std::clamp((i * m.frame_time() - t0) / (t1 - t0), 0.0, 1.0);
+    EXPECT_NEAR(b.q[ay] - a.q[ay], want, 1e-9) << i;
+    for (int f : feet) {
+      EXPECT_LT((fa.body_world[f].translation() - fb.body_world[f].translation()).norm(), 0.03)
+          << i;
+    }
+  }
+  const MotionPose& a = m.frame(m.num_frames() - 1);
+  const MotionPose& b = s.frame(s.num_frames() - 1);
+  const FkResult fa = ForwardKinematics(Model(), a.root_pos, a.root_rot, a.q.data());
+  const FkResult fb = ForwardKinematics(Model(), b.root_pos, b.root_rot, b.q.data());
+  for (const char* body : {"torso", "lwaist"}) {
+    EXPECT_LT(behind(fa, body), -0.13) << body << ": the slouch this is about";
+    EXPECT_GT(behind(fb, body), -0.10) << body << ": straightened";
+  }
+  EXPECT_THROW(m.Straightened(Model(), 20.0, 2.0, 1.0), ConfigError);
+}
+
 }  // namespace
 }  // namespace perch
