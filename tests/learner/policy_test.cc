@@ -300,23 +300,32 @@ TEST(ConvertStdModeTest, FixedTakesTheRunsSigmaTrainedKeepsTheSources) {
 namespace perch {
 namespace {
 
-// Walk (52 inputs: proprioceptive + goal) -> turn (50): the mapped network acts and values as the
-// source does when the dropped inputs sit at their running mean.
-TEST(DropTrailingInputs, ActsAsTheSourceWithTheDroppedInputsAtTheirMean) {
-  PpoLearner learner(PolicyConfig::Subtask(52), PpoConfig::Subtask(), 11);
+// A policy with non-trivial weights and observation statistics (drawn from rng), so that a wrong
+// column, row or offset in a mapping shows.
+proto::ModelWeights RandomizedWeights(const PolicyConfig& pc, const PpoConfig& ppo, uint64_t seed,
+                                      double count, Rng& rng) {
+  PpoLearner learner(pc, ppo, seed);
   proto::ModelWeights w;
   learner.ExportWeights(&w);
-  Rng rng(5);
-  // Non-trivial weights and statistics, so a wrong column or offset shows.
   for (int i = 0; i < w.params_size(); ++i) w.set_params(i, static_cast<float>(rng.Normal() * 0.3));
   proto::RunningStats* st = w.mutable_obs_stats();
-  st->set_count(100.0);
+  st->set_count(count);
   st->clear_mean();
   st->clear_var();
-  for (int i = 0; i < 52; ++i) {
+  for (int i = 0; i < pc.obs_dim; ++i) {
     st->add_mean(rng.Uniform(-1.0, 1.0));
     st->add_var(rng.Uniform(0.5, 2.0));
   }
+  return w;
+}
+
+// Walk (52 inputs: proprioceptive + goal) -> turn (50): the mapped network acts and values as the
+// source does when the dropped inputs sit at their running mean.
+TEST(DropTrailingInputs, ActsAsTheSourceWithTheDroppedInputsAtTheirMean) {
+  Rng rng(5);
+  const proto::ModelWeights w =
+      RandomizedWeights(PolicyConfig::Subtask(52), PpoConfig::Subtask(), 11, 100.0, rng);
+  const proto::RunningStats* st = &w.obs_stats();
   const proto::ModelWeights small = DropTrailingInputs(w, 50, "test");
   EXPECT_EQ(small.shape().obs_dim(), 50);
   EXPECT_EQ(small.obs_stats().mean_size(), 50);
@@ -349,19 +358,9 @@ TEST(DropTrailingInputs, ActsAsTheSourceWithTheDroppedInputsAtTheirMean) {
 // The meta that observes its active subtask (57 + 5 inputs) starts from one that did not (57): the
 // same actions and value whatever the new inputs hold, until training moves their weights.
 TEST(AppendZeroInputs, ActsAsTheSourceWhateverTheNewInputsHold) {
-  PpoLearner learner(PolicyConfig::Meta(57), PpoConfig::Meta(), 13);
-  proto::ModelWeights w;
-  learner.ExportWeights(&w);
   Rng rng(8);
-  for (int i = 0; i < w.params_size(); ++i) w.set_params(i, static_cast<float>(rng.Normal() * 0.3));
-  proto::RunningStats* st = w.mutable_obs_stats();
-  st->set_count(50.0);
-  st->clear_mean();
-  st->clear_var();
-  for (int i = 0; i < 57; ++i) {
-    st->add_mean(rng.Uniform(-1.0, 1.0));
-    st->add_var(rng.Uniform(0.5, 2.0));
-  }
+  const proto::ModelWeights w =
+      RandomizedWeights(PolicyConfig::Meta(57), PpoConfig::Meta(), 13, 50.0, rng);
   const proto::ModelWeights wide = AppendZeroInputs(w, 62, "test");
   EXPECT_EQ(wide.shape().obs_dim(), 62);
   ASSERT_EQ(wide.obs_stats().mean_size(), 62);
@@ -439,19 +438,9 @@ namespace {
 // The mirror-image task's policy acts as M_act(pi(M_obs(o))) and values as V(M_obs(o)), for any
 // signed, scaled, shifted permutation of inputs and actions (the normaliser statistics included).
 TEST(MirrorModelWeights, ActsAsTheSourceOnTheMirroredObservation) {
-  PpoLearner learner(PolicyConfig::Subtask(52), PpoConfig::Subtask(), 17);
-  proto::ModelWeights w;
-  learner.ExportWeights(&w);
   Rng rng(21);
-  for (int i = 0; i < w.params_size(); ++i) w.set_params(i, static_cast<float>(rng.Normal() * 0.3));
-  proto::RunningStats* st = w.mutable_obs_stats();
-  st->set_count(100.0);
-  st->clear_mean();
-  st->clear_var();
-  for (int i = 0; i < 52; ++i) {
-    st->add_mean(rng.Uniform(-1.0, 1.0));
-    st->add_var(rng.Uniform(0.5, 2.0));
-  }
+  const proto::ModelWeights w =
+      RandomizedWeights(PolicyConfig::Subtask(52), PpoConfig::Subtask(), 17, 100.0, rng);
   auto perm = [&](int n) {
     std::vector<int> p(n);
     for (int i = 0; i < n; ++i) p[i] = i;
