@@ -49,6 +49,8 @@ class Mlp {
   int num_params() const { return num_params_; }
   int max_width() const;
   const std::vector<int>& sizes() const { return sizes_; }  // [in, h1, ..., out]
+  // Where layer l's W_l starts in this MLP's parameters (its b_l follows W_l).
+  int weight_offset(int l) const { return w_offset_[l]; }
 
   // Orthogonal weights (as the authors: gain `hidden_gain` on hidden layers, `out_gain` on the
   // output rows [out_row_begin, out_row_end) ), zero biases. Call once per output block to give

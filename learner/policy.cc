@@ -328,14 +328,23 @@ PolicyConfig PolicyConfigFromShape(const proto::PolicyShape& s, const std::strin
   return c;
 }
 
+namespace {
+
+// A weights blob whose parameter vector does not fit the network its shape describes.
+void CheckParamCount(const proto::ModelWeights& w, const ActorCritic& net, const std::string& ctx) {
+  if (w.params_size() != net.num_params()) {
+    throw ConfigError(ctx + ": params has " + std::to_string(w.params_size()) +
+                      " values, its shape needs " + std::to_string(net.num_params()));
+  }
+}
+
+}  // namespace
+
 proto::ModelWeights WidenModelWeights(const proto::ModelWeights& narrow, const PolicyConfig& wide,
                                       uint64_t seed, const std::string& ctx) {
   const PolicyConfig nc = PolicyConfigFromShape(narrow.shape(), ctx);
   const ActorCritic small(nc, 0);
-  if (narrow.params_size() != small.num_params()) {
-    throw ConfigError(ctx + ": params has " + std::to_string(narrow.params_size()) +
-                      " values, its shape needs " + std::to_string(small.num_params()));
-  }
+  CheckParamCount(narrow, small, ctx);
   ActorCritic big(wide, seed);
   // Everything but the hidden widths must agree.
   proto::PolicyShape a, b;
@@ -372,10 +381,7 @@ proto::ModelWeights ResizeInputs(const proto::ModelWeights& w, int obs_dim,
                                  const std::string& ctx) {
   const PolicyConfig src_c = PolicyConfigFromShape(w.shape(), ctx);
   const ActorCritic src(src_c, 0);
-  if (w.params_size() != src.num_params()) {
-    throw ConfigError(ctx + ": params has " + std::to_string(w.params_size()) +
-                      " values, its shape needs " + std::to_string(src.num_params()));
-  }
+  CheckParamCount(w, src, ctx);
   PolicyConfig dst_c = src_c;
   dst_c.obs_dim = obs_dim;
   ActorCritic dst(dst_c, 0);
@@ -445,18 +451,13 @@ proto::ModelWeights WidenMetaChoices(const proto::ModelWeights& w, const PolicyC
                       ": differs from this run's meta policy in more than its switch classes");
   }
   const ActorCritic src(src_c, 0);
-  if (w.params_size() != src.num_params()) {
-    throw ConfigError(ctx + ": params has " + std::to_string(w.params_size()) +
-                      " values, its shape needs " + std::to_string(src.num_params()));
-  }
+  CheckParamCount(w, src, ctx);
   ActorCritic dst(mine, seed);  // fresh switch head
   const float* sp = w.params().data();
   float* dp = dst.params().data();
   const std::vector<int>& sizes = src.policy_mlp().sizes();
-  // Hidden layers: identical shapes, one contiguous block.
-  int hidden_params = 0;
-  for (size_t l = 0; l + 2 < sizes.size(); ++l)
-    hidden_params += sizes[l + 1] * sizes[l] + sizes[l + 1];
+  // Hidden layers: identical shapes, one contiguous block before the output layer.
+  const int hidden_params = src.policy_mlp().weight_offset(src.policy_mlp().num_layers() - 1);
   std::copy(sp, sp + hidden_params, dp);
   // Output layer W [head x h] column-major, then b [head]: the target rows follow the logits.
   const int h = sizes[sizes.size() - 2];
@@ -484,10 +485,7 @@ proto::ModelWeights MirrorModelWeights(const proto::ModelWeights& w, const Mirro
     throw ConfigError(ctx + ": only a Gaussian (subtask) policy can be mirrored");
   }
   const ActorCritic net(c, 0);
-  if (w.params_size() != net.num_params()) {
-    throw ConfigError(ctx + ": params has " + std::to_string(w.params_size()) +
-                      " values, its shape needs " + std::to_string(net.num_params()));
-  }
+  CheckParamCount(w, net, ctx);
   auto check = [&](const std::vector<int>& src, const std::vector<float>& scale,
                    const std::vector<float>& offset, int n, const char* what) {
     if (static_cast<int>(src.size()) != n || static_cast<int>(scale.size()) != n ||
@@ -499,9 +497,7 @@ proto::ModelWeights MirrorModelWeights(const proto::ModelWeights& w, const Mirro
     for (int i = 0; i < n; ++i) {
       if (src[i] < 0 || src[i] >= n || used[src[i]] || scale[i] == 0.0f) {
         throw ConfigError(ctx + ": the env's mirror map of " + what +
-                          " is not a signed "
-                          "permutation at " +
-                          std::to_string(i));
+                          " is not a signed permutation at " + std::to_string(i));
       }
       used[src[i]] = true;
     }
@@ -526,8 +522,7 @@ proto::ModelWeights MirrorModelWeights(const proto::ModelWeights& w, const Mirro
   // Mean head (the last layer, linear): row k = s_k row q(k), bias s_k b_q(k) + t_k.
   const std::vector<int>& sizes = net.policy_mlp().sizes();
   const int h = sizes[sizes.size() - 2];
-  int last = 0;
-  for (size_t l = 0; l + 2 < sizes.size(); ++l) last += sizes[l + 1] * sizes[l] + sizes[l + 1];
+  const int last = net.policy_mlp().weight_offset(net.policy_mlp().num_layers() - 1);
   for (int k = 0; k < ad; ++k) {
     const int q = m.act_src[k];
     const float sk = m.act_scale[k];
@@ -556,10 +551,7 @@ proto::ModelWeights ConvertStdMode(const proto::ModelWeights& w, const PolicyCon
   out.mutable_shape()->set_std_mode(StdModeName(mine.std_mode));
   if (mine.std_mode != StdMode::kFixed) return out;
   const ActorCritic src(PolicyConfigFromShape(w.shape(), ctx), 0);
-  if (w.params_size() != src.num_params()) {
-    throw ConfigError(ctx + ": params has " + std::to_string(w.params_size()) +
-                      " values, its shape needs " + std::to_string(src.num_params()));
-  }
+  CheckParamCount(w, src, ctx);
   for (int i = 0; i < src.act_dim(); ++i) {
     out.set_params(src.log_std_offset() + i, mine.init_log_std);
   }
