@@ -109,8 +109,11 @@ TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_p
   } else if (!o.banks.empty() || !o.bank_ang_vel.empty()) {
     throw ConfigError("--bank / --bank-ang-vel: only with --start end-poses");
   } else if (task != "walk" && task != "stand" && sec.contains("start")) {
-    // A fine-tuned policy is evaluated from its clip's first frame unless asked otherwise.
+    // A fine-tuned policy is evaluated from its clip's first frame unless asked otherwise, as
+    // the subtask itself is: without the banks' placement noise (sit applies it to every
+    // episode of a run that lists banks), so the retention figure compares like with like.
     sec["start"]["prob"] = 0.0;
+    sec["start"]["banks"] = Json::array();
   }
   if (!o.variant.empty()) {
     // The preset replaces the reward fields, so drop them before re-reading.

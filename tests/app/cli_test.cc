@@ -108,6 +108,28 @@ TEST_F(CliTest, EvalUsesTheCheckpointsConfigAndWarnsWhenConfigDiffers) {
   EXPECT_TRUE(Has(r.out, "differs from the config saved with")) << r.out;
 }
 
+TEST_F(CliTest, EvalOfAFineTunedSitFromTheFirstFrameIsTheSubtasksOwnStart) {
+  // sit_from_turn lists start banks, and sit applies the banks' placement noise (10 cm across)
+  // to every episode of such a config; its retention figure (issue 14) must start where the sit
+  // subtask's own evaluation does: the clip's first frame at its placement, no noise.
+  const std::string model = std::string(PERCH_SOURCE_DIR) + "/models/sit_from_turn/policy.bin";
+  Result r = Perch("eval --model " + model + " --episodes 2 --seed 5 --json", false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Json a = Json::parse(r.out);
+  EXPECT_TRUE(a["config"]["sit"]["start"]["banks"].empty()) << a["config"]["sit"]["start"];
+  // The same env without any banks gives the same episodes.
+  Json plain = a["config"];
+  plain["sit"]["start"] = Json{{"banks", Json::array()}, {"prob", 0.0}};
+  const std::string path = ::testing::TempDir() + "/sit_plain_" + std::to_string(getpid()) + ".json";
+  std::ofstream(path) << plain.dump();
+  r = Perch("eval --model " + model + " --config " + path + " --episodes 2 --seed 5 --json", false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Json b = Json::parse(r.out);
+  EXPECT_DOUBLE_EQ(a["mean_return"].get<double>(), b["mean_return"].get<double>());
+  EXPECT_DOUBLE_EQ(a["min_dist_mean_m"].get<double>(), b["min_dist_mean_m"].get<double>());
+  std::filesystem::remove(path);
+}
+
 TEST_F(CliTest, TrainEndsByItselfAtMaxSamplesWithASummary) {
   // A fresh clone has no runs/: train creates the run dir's parents.
   const std::string dir = ::testing::TempDir() + "perch_cli_train/nested/run";
