@@ -234,6 +234,11 @@ class SitMetrics : public EpisodeMetrics {
       const double yaw = env.RootRpy().z();
       rot_err_deg_.push_back(std::abs(AngleDiff(yaw, SitTask::ChairYaw(env))) * 180.0 / M_PI);
       time_to_sit_s_.push_back(first_contact_s_);
+      // The torso's pitch against the clip's seated pitch (+: leaning further back than the
+      // clip): the pose reward tracks joint angles only, so the whole body may tilt.
+      const MotionPose end = t.ReferenceAt(t.ClipEndStep());
+      const double pitch_ref = RpyFromQuat(end.root_rot).y();
+      pitch_dev_deg_.push_back(AngleDiff(env.RootRpy().y(), pitch_ref) * 180.0 / M_PI);
     }
   }
   bool Finish(const HumanoidChairEnv& env, bool fell) override {
@@ -249,6 +254,7 @@ class SitMetrics : public EpisodeMetrics {
     (*j)["seat_offset_cm_mean"] = {MeanOf(offset_x_cm_), MeanOf(offset_y_cm_)};
     (*j)["seat_orientation_error_deg_mean"] = MeanOf(rot_err_deg_);
     (*j)["seat_orientation_error_deg_p90"] = Percentile(rot_err_deg_, 0.9);
+    (*j)["seat_torso_pitch_vs_clip_deg_mean"] = MeanOf(pitch_dev_deg_);
     (*j)["first_contact_s_mean"] = MeanOf(time_to_sit_s_);
     (*j)["min_dist_mean_m"] = MeanOf(min_dists_);
     (*j)["min_dist_std_m"] = StdOf(min_dists_);
@@ -262,6 +268,7 @@ class SitMetrics : public EpisodeMetrics {
   bool success_ = false;
   double min_dist_ = 0, first_contact_s_ = -1;
   std::vector<double> pos_err_cm_, rot_err_deg_, time_to_sit_s_, min_dists_;
+  std::vector<double> pitch_dev_deg_;              // [deg] per success
   std::vector<double> offset_x_cm_, offset_y_cm_;  // [cm] chair frame
 };
 

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -23,7 +24,9 @@ Result Perch(const std::string& args, bool with_stderr = true) {
   return testing_util::RunPerch(args + (with_stderr ? " 2>&1" : " 2>/dev/null"));
 }
 
-bool Has(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+bool Has(const std::string& s, const std::string& part) {
+  return s.find(part) != std::string::npos;
+}
 
 class CliTest : public ::testing::Test {
  protected:
@@ -35,13 +38,16 @@ class CliTest : public ::testing::Test {
 TEST_F(CliTest, MisspelledOptionsAndSubcommandsAreNamedWithTheNearestValidName) {
   Result r = Perch("train --conifg configs/default.json");
   EXPECT_EQ(r.code, 2);
-  EXPECT_TRUE(Has(r.out, "--conifg: unknown option of 'perch train'; did you mean --config?")) << r.out;
+  EXPECT_TRUE(Has(r.out, "--conifg: unknown option of 'perch train'; did you mean --config?"))
+      << r.out;
   r = Perch("eval --model x.bin --episode 3");
   EXPECT_EQ(r.code, 2);
-  EXPECT_TRUE(Has(r.out, "--episode: unknown option of 'perch eval'; did you mean --episodes?")) << r.out;
+  EXPECT_TRUE(Has(r.out, "--episode: unknown option of 'perch eval'; did you mean --episodes?"))
+      << r.out;
   r = Perch("evaluate --model x.bin");
   EXPECT_EQ(r.code, 2);
-  EXPECT_TRUE(Has(r.out, "'evaluate': unknown subcommand of 'perch'; did you mean 'eval'?")) << r.out;
+  EXPECT_TRUE(Has(r.out, "'evaluate': unknown subcommand of 'perch'; did you mean 'eval'?"))
+      << r.out;
   r = Perch("bench clustr");
   EXPECT_TRUE(Has(r.out, "did you mean 'cluster'?")) << r.out;
   // Nothing near: named, no guess.
@@ -79,8 +85,9 @@ TEST_F(CliTest, VersionNamesTheDataRootAndDataDirOverridesIt) {
 
 TEST_F(CliTest, SetAndBaseComposeAndBadOverridesAreNamed) {
   // --set reaches the config: a value that breaks validation is reported with its field.
-  Result r = Perch(std::string("learner --config ") + PERCH_SOURCE_DIR +
-                   "/configs/mock.json --run-dir /tmp/unused --check-config --set ppo.num_epochs=0");
+  Result r =
+      Perch(std::string("learner --config ") + PERCH_SOURCE_DIR +
+            "/configs/mock.json --run-dir /tmp/unused --check-config --set ppo.num_epochs=0");
   EXPECT_EQ(r.code, 2) << r.out;
   EXPECT_TRUE(Has(r.out, "ppo.num_epochs")) << r.out;
   r = Perch(std::string("learner --config ") + PERCH_SOURCE_DIR +
@@ -96,8 +103,8 @@ TEST_F(CliTest, SetAndBaseComposeAndBadOverridesAreNamed) {
 TEST_F(CliTest, EvalUsesTheCheckpointsConfigAndWarnsWhenConfigDiffers) {
   // The stage-2 walker's checkpoint knows it walks toward targets: without --config, eval
   // measures that stage, not the forward stage of the defaults.
-  const std::string model =
-      std::string(PERCH_SOURCE_DIR) + "/models/walk_stage2_fallrestart/checkpoints/ckpt-0000013900.bin";
+  const std::string model = std::string(PERCH_SOURCE_DIR) +
+                            "/models/walk_stage2_fallrestart/checkpoints/ckpt-0000013900.bin";
   Result r = Perch("eval --model " + model + " --episodes 1 --json", /*with_stderr=*/false);
   ASSERT_EQ(r.code, 0) << r.out;
   const Json j = Json::parse(r.out);
@@ -120,7 +127,8 @@ TEST_F(CliTest, EvalOfAFineTunedSitFromTheFirstFrameIsTheSubtasksOwnStart) {
   // The same env without any banks gives the same episodes.
   Json plain = a["config"];
   plain["sit"]["start"] = Json{{"banks", Json::array()}, {"prob", 0.0}};
-  const std::string path = ::testing::TempDir() + "/sit_plain_" + std::to_string(getpid()) + ".json";
+  const std::string path =
+      ::testing::TempDir() + "/sit_plain_" + std::to_string(getpid()) + ".json";
   std::ofstream(path) << plain.dump();
   r = Perch("eval --model " + model + " --config " + path + " --episodes 2 --seed 5 --json", false);
   ASSERT_EQ(r.code, 0) << r.out;
@@ -128,6 +136,31 @@ TEST_F(CliTest, EvalOfAFineTunedSitFromTheFirstFrameIsTheSubtasksOwnStart) {
   EXPECT_DOUBLE_EQ(a["mean_return"].get<double>(), b["mean_return"].get<double>());
   EXPECT_DOUBLE_EQ(a["min_dist_mean_m"].get<double>(), b["min_dist_mean_m"].get<double>());
   std::filesystem::remove(path);
+}
+
+TEST_F(CliTest, SitEvalReportsWhereTheSeatedBodyIsAndTheBackrestPushesItForward) {
+  // models/sit/README.md: the authors' backrest holds the seated pelvis forward of the target;
+  // without the backrest it settles closer. The torso's pitch stays near the clip's (the pose
+  // reward tracks joint angles, and the body is shifted, not tilted).
+  const std::string src = PERCH_SOURCE_DIR;
+  const std::string base =
+      "eval --model " + src + "/models/sit/policy.bin --episodes 3 --seed 13 --json";
+  Result r = Perch(base, false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Json a = Json::parse(r.out);
+  r = Perch(base + " --chair " + src + "/models/sit/chair_authors_nobackrest.json", false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Json b = Json::parse(r.out);
+  ASSERT_GT(a["success_rate"].get<double>(), 0.5);
+  ASSERT_GT(b["success_rate"].get<double>(), 0.5);
+  const double ax = a["seat_offset_cm_mean"][0].get<double>();
+  const double bx = b["seat_offset_cm_mean"][0].get<double>();
+  EXPECT_GT(ax, bx + 1.5) << ax << " vs " << bx;
+  const double err = a["seat_position_error_cm_mean"].get<double>();
+  EXPECT_GE(err + 1e-9, std::abs(ax));  // the horizontal error includes the forward offset
+  for (const Json* j : {&a, &b}) {
+    EXPECT_LT(std::abs((*j)["seat_torso_pitch_vs_clip_deg_mean"].get<double>()), 5.0) << *j;
+  }
 }
 
 TEST_F(CliTest, TrainEndsByItselfAtMaxSamplesWithASummary) {
@@ -150,7 +183,8 @@ TEST_F(CliTest, TrainEndsByItselfAtMaxSamplesWithASummary) {
   // The run stopped at the first update past the budget, not long after.
   int64_t samples = 0;
   std::ifstream in(dir + "/metrics.jsonl");
-  for (std::string line; std::getline(in, line);) samples = Json::parse(line)["samples"].get<int64_t>();
+  for (std::string line; std::getline(in, line);)
+    samples = Json::parse(line)["samples"].get<int64_t>();
   EXPECT_GE(samples, 3000);
   EXPECT_LT(samples, 3000 + 4 * 1024);
 }
@@ -166,8 +200,9 @@ TEST_F(CliTest, TrainEndsByItselfAtItsSuccessTarget) {
                          " --target-success 0.5 --set cluster.target_window=4"
                          " --set cluster.init_from=models/turn_left/policy.bin"
                          " --set ppo.steps_per_update=1024 --set ppo.learning_rate=1e-6"
-                         " --rollout-port " + std::to_string(port) + " --weights-port " +
-                         std::to_string(port + 1) + " --metrics-port " + std::to_string(port + 2));
+                         " --rollout-port " +
+                         std::to_string(port) + " --weights-port " + std::to_string(port + 1) +
+                         " --metrics-port " + std::to_string(port + 2));
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_TRUE(Has(r.out, "Run ended (target_success)")) << r.out;
   EXPECT_TRUE(Has(r.out, "over the last 4 judged episodes")) << r.out;  // the summary
