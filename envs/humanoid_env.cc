@@ -230,11 +230,10 @@ HumanoidState MirrorHumanoidState(const HumanoidState& s, const HumanoidModel& m
   std::vector<double> sign;
   MirrorJointMap(model, &c, &sign);
   HumanoidState o = s;
-  o.root_pos.y() = -s.root_pos.y();
-  o.root_quat =
-      Eigen::Quaterniond(s.root_quat.w(), -s.root_quat.x(), s.root_quat.y(), -s.root_quat.z());
-  o.root_lin_vel.y() = -s.root_lin_vel.y();
-  o.root_ang_vel = Eigen::Vector3d(-s.root_ang_vel.x(), s.root_ang_vel.y(), -s.root_ang_vel.z());
+  o.root_pos = MirrorPolar(s.root_pos);
+  o.root_quat = MirrorRotation(s.root_quat);
+  o.root_lin_vel = MirrorPolar(s.root_lin_vel);
+  o.root_ang_vel = MirrorAxial(s.root_ang_vel);
   for (int j = 0; j < model.num_joints(); ++j) {
     o.q[c[j]] = sign[j] * s.q[j];
     o.qd[c[j]] = sign[j] * s.qd[j];

@@ -132,4 +132,12 @@ void GeomMassProperties(const Geom& g, double density, double* mass, Eigen::Vect
 void MirrorJointMap(const HumanoidModel& model, std::vector<int>* counterpart,
                     std::vector<double>* sign);
 
+// The reflection y -> -y (the humanoid's sagittal plane), shared by states and reference poses:
+// a position or linear velocity flips y; a rotation or angular velocity (axial) flips x and z.
+inline Eigen::Vector3d MirrorPolar(const Eigen::Vector3d& v) { return {v.x(), -v.y(), v.z()}; }
+inline Eigen::Vector3d MirrorAxial(const Eigen::Vector3d& w) { return {-w.x(), w.y(), -w.z()}; }
+inline Eigen::Quaterniond MirrorRotation(const Eigen::Quaterniond& q) {
+  return Eigen::Quaterniond(q.w(), -q.x(), q.y(), -q.z());
+}
+
 }  // namespace perch

@@ -147,10 +147,10 @@ MotionPose ReferenceMotion::MirrorPose(const MotionPose& p, const HumanoidModel&
   std::vector<double> s;
   MirrorJointMap(model, &c, &s);
   MotionPose o = p;
-  o.root_pos.y() = -p.root_pos.y();
-  o.root_rot = Eigen::Quaterniond(p.root_rot.w(), -p.root_rot.x(), p.root_rot.y(), -p.root_rot.z());
-  o.root_vel.y() = -p.root_vel.y();
-  o.root_angvel = Eigen::Vector3d(-p.root_angvel.x(), p.root_angvel.y(), -p.root_angvel.z());
+  o.root_pos = MirrorPolar(p.root_pos);
+  o.root_rot = MirrorRotation(p.root_rot);
+  o.root_vel = MirrorPolar(p.root_vel);
+  o.root_angvel = MirrorAxial(p.root_angvel);
   for (int j = 0; j < static_cast<int>(c.size()); ++j) {
     o.q[c[j]] = s[j] * p.q[j];
     if (p.qdot.size() == p.q.size()) o.qdot[c[j]] = s[j] * p.qdot[j];
