@@ -42,8 +42,8 @@ struct SpawnConfig {
   double radius_max = 0.0;  // [m]
   // Facing the centre +- U(-yaw_noise_deg, yaw_noise_deg) (walk-only "easy": 45) [deg].
   double yaw_noise_deg = 0.0;
-  std::array<double, 2> zone1_deg{0.0, 90.0};    // authors' code: theta ~ U(-90, 90) deg
-  std::array<double, 2> zone2_deg{90.0, 135.0};  // our proposal (notes 6): lateral sides
+  std::array<double, 2> zone1_deg{0.0, 90.0};     // authors' code: theta ~ U(-90, 90) deg
+  std::array<double, 2> zone2_deg{90.0, 135.0};   // our proposal (notes 6): lateral sides
   std::array<double, 2> zone3_deg{135.0, 180.0};  // our proposal: rear side
 };
 
@@ -51,28 +51,28 @@ struct SpawnConfig {
 // or a row of a 51-column qpos array in an npz file (notes 7.2), e.g. the authors' Zone 1 start
 // frame: cmu_mocap_walk_plain.npz, qpos_03, row 31.
 struct InitConfig {
-  std::string qpos_file;                 // empty: standing pose
+  std::string qpos_file;  // empty: standing pose
   std::string qpos_array = "qpos_03";
   int qpos_row = 31;
-  double standing_clearance = 0.002;     // feet above the floor at a standing start [m]
+  double standing_clearance = 0.002;  // feet above the floor at a standing start [m]
 };
 
 struct SafetyConfig {
   // Above Bullet's joint-speed clamp (physics.max_joint_speed, 100 rad/s): light links (feet,
   // hands) reach the clamp under random full torques without anything blowing up.
-  double max_joint_speed = 150.0;     // [rad/s]; beyond: invalid episode
-  double max_root_speed = 10.0;       // [m/s] (falling from 1.3 m: 5 m/s)
-  double max_root_ang_speed = 60.0;   // [rad/s]
-  double max_abs_position = 1000.0;   // [m]
+  double max_joint_speed = 150.0;    // [rad/s]; beyond: invalid episode
+  double max_root_speed = 10.0;      // [m/s] (falling from 1.3 m: 5 m/s)
+  double max_root_ang_speed = 60.0;  // [rad/s]
+  double max_abs_position = 1000.0;  // [m]
 };
 
 // The `stand` task: reward for staying upright, early termination on falling, time limit.
 struct StandTaskConfig {
-  double alive_bonus = 1.0;        // per control step while up
-  double upright_weight = 1.0;     // x (torso up-vector z), in [-1, 1]
-  double action_cost = 0.01;       // x mean(a^2)
-  double min_torso_z = 0.78;       // authors' alive test: torso z > 0.78 m
-  int max_episode_steps = 1000;    // 16.5 s
+  double alive_bonus = 1.0;                        // per control step while up
+  double upright_weight = 1.0;                     // x (torso up-vector z), in [-1, 1]
+  double action_cost = 0.01;                       // x mean(a^2)
+  double min_torso_z = 0.78;                       // authors' alive test: torso z > 0.78 m
+  int max_episode_steps = 1000;                    // 16.5 s
   std::array<double, 2> walk_target{1000.0, 0.0};  // goal features: Roboschool's default [m]
 };
 
@@ -130,5 +130,9 @@ struct EnvConfig {
 ObsLayout ObsLayoutFromName(const std::string& name, const std::string& ctx);
 std::string ObsLayoutName(ObsLayout layout);
 int ObsLayoutDim(ObsLayout layout);  // 50, 52, 57
+
+// Where each block of the observation starts: more(6), joints(42), feet(2), then the layout's
+// goal(2) or chair(7). The writer, the spec's slices and the mirror map share these.
+constexpr int kObsMore = 0, kObsJoints = 6, kObsFeet = 48, kObsExtra = 50;
 
 }  // namespace perch

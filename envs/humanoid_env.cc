@@ -1,6 +1,7 @@
 #include "envs/humanoid_env.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 
 #include "common/npz.h"
@@ -177,8 +178,8 @@ MirrorMap BuildMirrorMap(const HumanoidModel& model, ObsLayout layout, ActionMod
   m.obs_offset.assign(obs_dim, 0.0f);
   for (int i = 0; i < obs_dim; ++i) m.obs_src[i] = i;
   // more(6): height, roll, pitch, heading-frame velocity: roll and the sideways speed flip.
-  m.obs_scale[1] = -1.0f;
-  m.obs_scale[4] = -1.0f;
+  m.obs_scale[kObsMore + 1] = -1.0f;
+  m.obs_scale[kObsMore + 4] = -1.0f;
   // joints(42): q' of joint c(j) = sign_j q_j; in normalised units q_n = (q - mid) / half-range,
   // so q_n' = sign hr_j / hr_c q_n + (sign mid_j - mid_c) / hr_c (exactly +-q_n for mirrored
   // limits).
@@ -186,7 +187,7 @@ MirrorMap BuildMirrorMap(const HumanoidModel& model, ObsLayout layout, ActionMod
     const Joint& a = model.joint(j);
     const Joint& b = model.joint(c[j]);
     const double hr_a = 0.5 * (a.upper - a.lower), hr_b = 0.5 * (b.upper - b.lower);
-    const int dst = 6 + 2 * c[j], src = 6 + 2 * j;
+    const int dst = kObsJoints + 2 * c[j], src = kObsJoints + 2 * j;
     m.obs_src[dst] = src;
     m.obs_scale[dst] = static_cast<float>(sign[j] * hr_a / hr_b);
     m.obs_offset[dst] = static_cast<float>((sign[j] * a.mid() - b.mid()) / hr_b);
@@ -194,15 +195,15 @@ MirrorMap BuildMirrorMap(const HumanoidModel& model, ObsLayout layout, ActionMod
     m.obs_scale[dst + 1] = static_cast<float>(sign[j]);
   }
   // feet(2): right and left swap.
-  m.obs_src[48] = 49;
-  m.obs_src[49] = 48;
+  m.obs_src[kObsFeet] = kObsFeet + 1;
+  m.obs_src[kObsFeet + 1] = kObsFeet;
   if (layout == ObsLayout::kProprioGoal) {
-    m.obs_scale[50] = -1.0f;  // sin of the target's azimuth; cos unchanged
+    m.obs_scale[kObsExtra] = -1.0f;  // sin of the target's azimuth; cos unchanged
   } else if (layout == ObsLayout::kProprioChair) {
-    m.obs_scale[51] = -1.0f;  // seat target's y in the torso frame
+    m.obs_scale[kObsExtra + 1] = -1.0f;  // seat target's y in the torso frame
     // Relative quaternion (x, y, z, w): a reflection maps (w, x, y, z) to (w, -x, y, -z).
-    m.obs_scale[53] = -1.0f;
-    m.obs_scale[55] = -1.0f;
+    m.obs_scale[kObsExtra + 3] = -1.0f;
+    m.obs_scale[kObsExtra + 5] = -1.0f;
   }
   // Actions in action order: torque max_torque clip(a), or a PD target mid + a half-range.
   const int nj = model.num_joints();
@@ -250,9 +251,11 @@ void HumanoidChairEnv::BuildSpec() {
   spec_.obs_high.assign(spec_.obs_dim, static_cast<float>(config_.obs.clip));
   spec_.act_low.assign(spec_.act_dim, -1.0f);
   spec_.act_high.assign(spec_.act_dim, 1.0f);
-  spec_.obs_slices = {{"more", 0, 6}, {"joints", 6, 42}, {"feet", 48, 2}};
-  if (layout == ObsLayout::kProprioChair) spec_.obs_slices.push_back({"chair", 50, 7});
-  if (layout == ObsLayout::kProprioGoal) spec_.obs_slices.push_back({"goal", 50, 2});
+  spec_.obs_slices = {{"more", kObsMore, kObsJoints - kObsMore},
+                      {"joints", kObsJoints, kObsFeet - kObsJoints},
+                      {"feet", kObsFeet, kObsExtra - kObsFeet}};
+  if (layout == ObsLayout::kProprioChair) spec_.obs_slices.push_back({"chair", kObsExtra, 7});
+  if (layout == ObsLayout::kProprioGoal) spec_.obs_slices.push_back({"goal", kObsExtra, 2});
   spec_.control_dt = config_.physics.physics_dt * config_.physics.substeps;
   spec_.max_episode_steps = task_->max_episode_steps();
   spec_.has_success = task_->has_success();
@@ -437,6 +440,7 @@ void HumanoidChairEnv::WriteObservation(ObsLayout layout, float* obs) const {
     obs[k++] = Clip(model_.joint(j).Normalize(s.q[j]), clip);
     obs[k++] = Clip(oc.joint_speed_scale * s.qd[j], clip);
   }
+  assert(k == kObsFeet);
   obs[k++] = shown_flags_[0] ? 1.0f : 0.0f;
   obs[k++] = shown_flags_[1] ? 1.0f : 0.0f;
   if (layout == ObsLayout::kProprioGoal) {
