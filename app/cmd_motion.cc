@@ -259,12 +259,14 @@ void RegisterMotionCommands(CLI::App& root, CLI::App& bench) {
     std::string name, out;
     std::string motions = "data/motions";
     double deg = 20.0, t0 = 1.4, t1 = 2.2;
+    std::string keep = "torso";
   };
   auto st = std::make_shared<StraightenArgs>();
   CLI::App* sg = motion->add_subcommand(
       "straighten",
-      "Write a clip that sits up straighter: pelvis and legs rotated forward against the torso "
-      "(abdomen_y + DEG, hip_y - DEG), the pelvis kept in place");
+      "Write a clip with the abdomen turned by DEG: --keep torso: abdomen_y + DEG, hip_y - DEG, "
+      "the pelvis rotates under the torso, kept in place; --keep pelvis: abdomen_y - DEG, the "
+      "torso pitches forward (sits up) and nothing below the waist moves");
   sg->add_option("name", st->name, "clip name (data/motions/NAME.json)")->required();
   sg->add_option("out", st->out, "output clip JSON (must not exist)")->required();
   sg->add_option("--motions", st->motions, "directory of the clips");
@@ -273,15 +275,25 @@ void RegisterMotionCommands(CLI::App& root, CLI::App& bench) {
       ->check(CLI::Range(-60.0, 60.0));
   sg->add_option("--from-s", st->t0, "ramp start [s]")->capture_default_str();
   sg->add_option("--to-s", st->t1, "ramp end [s]; held after")->capture_default_str();
+  sg->add_option("--keep", st->keep, "what keeps its world pose: torso or pelvis")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"torso", "pelvis"}));
   sg->callback([st] {
     if (std::filesystem::exists(st->out)) throw ConfigError(st->out + ": exists; not overwritten");
     const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
     ReferenceMotion m =
         ReferenceMotion::Load(ResolveProjectPath(st->motions) + "/" + st->name + ".json");
-    ReferenceMotion out = m.Straightened(model, st->deg, st->t0, st->t1);
+    ReferenceMotion out = m.Straightened(model, st->deg, st->t0, st->t1, st->keep);
     out.set_name(std::filesystem::path(st->out).stem().string());
     out.Save(st->out);
-    std::cerr << "wrote " << st->out << "\n";
+    const MotionPose& a = m.frame(m.num_frames() - 1);
+    const MotionPose& b = out.frame(out.num_frames() - 1);
+    std::cerr << "wrote " << st->out << "; last frame, reach behind the pelvis [cm]:";
+    for (const char* body : {"torso", "lwaist"}) {
+      std::cerr << " " << body << " " << 100 * ReferenceMotion::ReachBehindPelvis(model, a, body)
+                << " -> " << 100 * ReferenceMotion::ReachBehindPelvis(model, b, body);
+    }
+    std::cerr << "\n";
   });
   struct BenchArgs {
     std::string bvh = "../shared/mocap/08_01.bvh";

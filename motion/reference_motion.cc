@@ -158,8 +158,25 @@ MotionPose ReferenceMotion::MirrorPose(const MotionPose& p, const HumanoidModel&
   return o;
 }
 
+double ReferenceMotion::ReachBehindPelvis(const HumanoidModel& model, const MotionPose& p,
+                                          const std::string& body) {
+  const int b = model.FindBody(body);
+  if (b < 0) throw ConfigError("no body named \"" + body + "\"");
+  const FkResult fk = ForwardKinematics(model, p.root_pos, p.root_rot, p.q.data());
+  double x = 1e9;
+  for (const Geom& g : model.body(b).geoms) {
+    for (double a = 0; a <= 1.0 + 1e-9; a += 0.05) {  // along the capsule's segment
+      x = std::min(x, (fk.body_world[b] * (g.from + a * (g.to - g.from))).x() - g.radius);
+    }
+  }
+  return fk.body_world[model.pelvis_body()].translation().x() - x;
+}
+
 ReferenceMotion ReferenceMotion::Straightened(const HumanoidModel& model, double deg, double t0,
-                                              double t1) const {
+                                              double t1, const std::string& keep) const {
+  if (keep != "torso" && keep != "pelvis") {
+    throw ConfigError("straighten: keep must be torso or pelvis (got \"" + keep + "\")");
+  }
   const int ay = model.FindJoint("abdomen_y");
   const int rh = model.FindJoint("right_hip_y");
   const int lh = model.FindJoint("left_hip_y");
@@ -173,20 +190,32 @@ ReferenceMotion ReferenceMotion::Straightened(const HumanoidModel& model, double
     const double t = i * frame_time_;
     const double a = deg * M_PI / 180.0 * std::clamp((t - t0) / (t1 - t0), 0.0, 1.0);
     MotionPose& f = m.frames_[i];
-    const Eigen::Vector3d before = ForwardKinematics(model, f.root_pos, f.root_rot, f.q.data())
-                                       .body_world[pelvis]
-                                       .translation();
-    f.q[ay] += a;
-    f.q[rh] -= a;
-    f.q[lh] -= a;
-    const Eigen::Vector3d after = ForwardKinematics(model, f.root_pos, f.root_rot, f.q.data())
-                                      .body_world[pelvis]
-                                      .translation();
-    f.root_pos += before - after;
+    const Eigen::Isometry3d before =
+        ForwardKinematics(model, f.root_pos, f.root_rot, f.q.data()).body_world[pelvis];
+    // abdomen_y + DEG with the torso held opens the torso-pelvis angle and the hips close it
+    // again (the torso-thigh angle is unchanged); with the pelvis held, abdomen_y - DEG closes
+    // the torso-thigh angle by DEG: the torso pitches forward, i.e. sits up.
+    if (keep == "torso") {
+      f.q[ay] += a;
+      f.q[rh] -= a;
+      f.q[lh] -= a;
+    } else {
+      f.q[ay] -= a;
+    }
+    const Eigen::Isometry3d after =
+        ForwardKinematics(model, f.root_pos, f.root_rot, f.q.data()).body_world[pelvis];
+    if (keep == "torso") {
+      f.root_pos += before.translation() - after.translation();
+    } else {
+      // The rigid motion that puts the pelvis back where it was, applied to the whole body.
+      const Eigen::Isometry3d g = before * after.inverse();
+      f.root_rot = Eigen::Quaterniond(g.linear() * f.root_rot.toRotationMatrix()).normalized();
+      f.root_pos = g * f.root_pos;
+    }
   }
   m.ComputeVelocities();
   if (m.meta_.is_object()) {
-    m.meta_["straightened"] = {{"abdomen_y_deg", deg}, {"ramp_s", {t0, t1}}};
+    m.meta_["straightened"] = {{"abdomen_y_deg", deg}, {"ramp_s", {t0, t1}}, {"keep", keep}};
   }
   return m;
 }

@@ -70,7 +70,16 @@ class ReferenceMotion {
   // thighs keep their direction), the torso keeping its orientation, and the root moved so the
   // pelvis stays where it was. deg(t) ramps linearly from 0 at t0 to `deg` at t1 [s] and holds.
   // Velocities recomputed. ConfigError when the model lacks those joints or t1 <= t0.
-  ReferenceMotion Straightened(const HumanoidModel& model, double deg, double t0, double t1) const;
+  // How far body's geoms reach behind (-x of) the pelvis centre in pose p [m, >= 0 behind]: the
+  // seated clip's clearance from a backrest (the sit clip faces +x).
+  static double ReachBehindPelvis(const HumanoidModel& model, const MotionPose& p,
+                                  const std::string& body);
+  // keep = "torso": the torso keeps its world orientation, the pelvis its place; the hips turn
+  // back by DEG so the legs keep theirs (the lower body rotates forward under the torso).
+  // keep = "pelvis": the pelvis and legs keep their world pose; abdomen_y - DEG, and the torso
+  // pitches forward about the waist (the upper body sits up, nothing below the waist moves).
+  ReferenceMotion Straightened(const HumanoidModel& model, double deg, double t0, double t1,
+                               const std::string& keep = "torso") const;
 
   // Metadata carried with the file (source clip, frame range, acknowledgement, measurements).
   Json& meta() { return meta_; }

@@ -191,16 +191,6 @@ TEST(Straightened, KeepsPelvisFeetAndTorsoAndClearsTheBack) {
   const int pelvis = Model().pelvis_body();
   const int ay = Model().FindJoint("abdomen_y");
   const int feet[2] = {Model().FindBody("right_foot"), Model().FindBody("left_foot")};
-  auto behind = [&](const FkResult& fk, const char* body) {  // most negative x rel. the pelvis
-    const int b = Model().FindBody(body);
-    double x = 1e9;
-    for (const Geom& g : Model().body(b).geoms) {
-      for (double a = 0; a <= 1.0; a += 0.05) {
-        x = std::min(x, (fk.body_world[b] * (g.from + a * (g.to - g.from))).x() - g.radius);
-      }
-    }
-    return x - fk.body_world[pelvis].translation().x();
-  };
   for (int i = 0; i < m.num_frames(); ++i) {
     const MotionPose& a = m.frame(i);
     const MotionPose& b = s.frame(i);
@@ -223,10 +213,53 @@ TEST(Straightened, KeepsPelvisFeetAndTorsoAndClearsTheBack) {
   const FkResult fa = ForwardKinematics(Model(), a.root_pos, a.root_rot, a.q.data());
   const FkResult fb = ForwardKinematics(Model(), b.root_pos, b.root_rot, b.q.data());
   for (const char* body : {"torso", "lwaist"}) {
-    EXPECT_LT(behind(fa, body), -0.13) << body << ": the slouch this is about";
-    EXPECT_GT(behind(fb, body), -0.10) << body << ": straightened";
+    EXPECT_GT(ReferenceMotion::ReachBehindPelvis(Model(), a, body), 0.13)
+        << body << ": the slouch this is about";
+    EXPECT_LT(ReferenceMotion::ReachBehindPelvis(Model(), b, body), 0.10)
+        << body << ": straightened";
   }
   EXPECT_THROW(m.Straightened(Model(), 20.0, 2.0, 1.0), ConfigError);
+}
+
+TEST(Straightened, KeepPelvisSitsTheTorsoUpAndMovesNothingBelowTheWaist) {
+  const ReferenceMotion m =
+      ReferenceMotion::Load(std::string(PERCH_SOURCE_DIR) + "/data/motions/sit.json");
+  const ReferenceMotion s = m.Straightened(Model(), 8.0, 1.6, 2.4, "pelvis");
+  const int ay = Model().FindJoint("abdomen_y");
+  const int pelvis = Model().pelvis_body();
+  const int torso = Model().FindBody("torso");
+  const int last = m.num_frames() - 1;
+  for (int i : {0, last / 2, last}) {
+    const MotionPose& a = m.frame(i);
+    const MotionPose& b = s.frame(i);
+    const FkResult fa = ForwardKinematics(Model(), a.root_pos, a.root_rot, a.q.data());
+    const FkResult fb = ForwardKinematics(Model(), b.root_pos, b.root_rot, b.q.data());
+    // Every body from the pelvis down keeps its world pose; only abdomen_y differs.
+    for (const char* body : {"pelvis", "right_thigh", "left_shin", "right_foot", "left_foot"}) {
+      const int k = Model().FindBody(body);
+      EXPECT_LT((fa.body_world[k].translation() - fb.body_world[k].translation()).norm(), 1e-9)
+          << body << " frame " << i;
+      EXPECT_LT(Eigen::Quaterniond(fa.body_world[k].linear())
+                    .angularDistance(Eigen::Quaterniond(fb.body_world[k].linear())),
+                1e-9)
+          << body;
+    }
+    for (int j = 0; j < Model().num_joints(); ++j) {
+      if (j != ay) EXPECT_EQ(a.q[j], b.q[j]) << j;
+    }
+  }
+  // Seated (last frame): the torso is 8 deg more upright, so its centre lies further forward
+  // (+x, the chair is behind) of the pelvis than the clip's.
+  const MotionPose& a = m.frame(last);
+  const MotionPose& b = s.frame(last);
+  const FkResult fa = ForwardKinematics(Model(), a.root_pos, a.root_rot, a.q.data());
+  const FkResult fb = ForwardKinematics(Model(), b.root_pos, b.root_rot, b.q.data());
+  const double xa = (fa.body_world[torso].translation() - fa.body_world[pelvis].translation()).x();
+  const double xb = (fb.body_world[torso].translation() - fb.body_world[pelvis].translation()).x();
+  EXPECT_GT(xb, xa + 0.02) << xa << " -> " << xb;
+  EXPECT_NEAR(a.root_rot.angularDistance(b.root_rot), 8.0 * M_PI / 180.0, 1e-6);
+  EXPECT_NEAR(b.q[ay] - a.q[ay], -8.0 * M_PI / 180.0, 1e-12);
+  EXPECT_THROW(m.Straightened(Model(), 8.0, 1.6, 2.4, "knees"), ConfigError);
 }
 
 }  // namespace
