@@ -33,6 +33,7 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
                   "motion_file",
                   "similarity",
                   "approach_weight",
+                  "approach_horizontal",
                   "hold_phase",
                   "hold_pose_weight",
                   "hold_energy_weight",
@@ -71,6 +72,7 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
         SimilarityRewardConfig::FromJson(j["similarity"], ctx + ".similarity", c.similarity);
   }
   GetOptional(j, "approach_weight", c.approach_weight, ctx);
+  GetOptional(j, "approach_horizontal", c.approach_horizontal, ctx);
   GetOptional(j, "hold_phase", c.hold_phase, ctx);
   GetOptional(j, "hold_pose_weight", c.hold_pose_weight, ctx);
   GetOptional(j, "hold_energy_weight", c.hold_energy_weight, ctx);
@@ -142,6 +144,7 @@ Json SitTaskConfig::ToJson() const {
               {"motion_file", motion_file},
               {"similarity", similarity.ToJson()},
               {"approach_weight", approach_weight},
+              {"approach_horizontal", approach_horizontal},
               {"hold_phase", hold_phase},
               {"hold_pose_weight", hold_pose_weight},
               {"hold_energy_weight", hold_energy_weight},
@@ -246,11 +249,16 @@ bool SitTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState*
   return true;
 }
 
+double SitTask::ApproachDistance(const HumanoidChairEnv& env) const {
+  if (!c_.approach_horizontal) return env.PelvisSeatDistance();
+  return (env.PelvisPosition() - env.SeatTargetWorld()).head<2>().norm();
+}
+
 void SitTask::OnReset(HumanoidChairEnv& env, Rng& rng) {
   RememberPose(env);
-  m_.prev_distance = env.PelvisSeatDistance();
+  m_.prev_distance = ApproachDistance(env);
   terms_ = SitTerms();
-  terms_.seat_distance_m = m_.prev_distance;
+  terms_.seat_distance_m = env.PelvisSeatDistance();
   contact_run_ = 0;
   succeeded_ = false;
   env.SetWalkTarget(env.SeatTargetWorld().head<2>());
@@ -268,7 +276,7 @@ TaskStep SitTask::OnStep(const HumanoidChairEnv& env, const float* action) {
     t.energy = c_.hold_energy_weight * EnergyCost(c_.energy, env, action);
   } else {
     t.similarity = sim.total;
-    t.approach = ApproachReward(m_.prev_distance, t.seat_distance_m, dt_, c_.approach_weight);
+    t.approach = ApproachReward(m_.prev_distance, ApproachDistance(env), dt_, c_.approach_weight);
   }
   if (c_.hold_contact_weight > 0 && ClipEnded(k) && env.PelvisSeatContact()) {
     t.contact = c_.hold_contact_weight;
@@ -284,7 +292,7 @@ TaskStep SitTask::OnStep(const HumanoidChairEnv& env, const float* action) {
   }
   t.total = t.similarity + t.approach + t.energy + t.contact + t.seat + t.root_pos;
   terms_ = t;
-  m_.prev_distance = t.seat_distance_m;
+  m_.prev_distance = ApproachDistance(env);
   RememberPose(env);
   TaskStep r;
   r.reward = static_cast<float>(t.total);

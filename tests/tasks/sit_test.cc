@@ -99,6 +99,34 @@ TEST(SitTask, ApproachRewardIsTheSpeedTowardTheSeat) {
   EXPECT_NEAR(r.reward, t.similarity + t.approach, 1e-5);
 }
 
+TEST(SitTask, HorizontalApproachPaysOnlyTheHorizontalClosingSpeed) {
+  auto env = MakeSitEnv(Json{{"reference_state_init", false}, {"approach_horizontal", true}});
+  std::vector<float> obs(env->spec().obs_dim), next(obs.size());
+  std::vector<float> zero(env->spec().act_dim, 0.0f);
+  env->Seed(2);
+  env->Reset(obs.data());
+  const double dt = env->spec().control_dt;
+  auto horizontal = [&] {
+    return (env->PelvisPosition() - env->SeatTargetWorld()).head<2>().norm();
+  };
+  double h0 = horizontal(), d0 = env->PelvisSeatDistance();
+  // Falling with zero torques: the pelvis drops much more than it moves across, so the 3-D
+  // distance changes by more than the horizontal one; only the latter is paid.
+  double paid = 0, paid_3d = 0;
+  for (int k = 0; k < 40; ++k) {
+    env->Step(zero.data(), next.data());
+    const SitTerms& t = TaskOf(*env).last_terms();
+    EXPECT_NEAR(t.approach, 0.5 * (h0 - horizontal()) / dt, 1e-9) << k;
+    EXPECT_NEAR(t.seat_distance_m, env->PelvisSeatDistance(), 1e-12);  // reported as before
+    paid += t.approach;
+    paid_3d += 0.5 * (d0 - env->PelvisSeatDistance()) / dt;
+    h0 = horizontal();
+    d0 = env->PelvisSeatDistance();
+  }
+  EXPECT_GT(std::abs(paid_3d - paid), 1.0);
+  EXPECT_FALSE(SitTaskConfig().approach_horizontal);  // the paper's 3-D distance by default
+}
+
 TEST(SitTask, HoldContactBonusIsPaidOnlyForPelvisContactAfterTheClip) {
   // Two envs, the same seated start and actions: the rewards differ by the bonus exactly on the
   // steps after the clip's end where the pelvis touches the seat, and nowhere else.
@@ -157,9 +185,8 @@ TEST(SitTask, StepsReportSuccessAfterThreeSecondsOfSeatContact) {
 TEST(SitTask, HoldSeatTermRewardsThePelvisNearTheSeatTargetAfterTheClip) {
   const double w = 0.2, alpha = 200.0;
   auto plain = MakeSitEnv(Json{{"reference_state_init", false}});
-  auto seat = MakeSitEnv(Json{{"reference_state_init", false},
-                              {"hold_seat_weight", w},
-                              {"hold_seat_alpha", alpha}});
+  auto seat = MakeSitEnv(
+      Json{{"reference_state_init", false}, {"hold_seat_weight", w}, {"hold_seat_alpha", alpha}});
   std::vector<float> obs(57), next(57), zero(21, 0.0f);
   for (auto* e : {plain.get(), seat.get()}) {
     e->Seed(4);
@@ -172,8 +199,7 @@ TEST(SitTask, HoldSeatTermRewardsThePelvisNearTheSeatTargetAfterTheClip) {
   for (int k = 0; k < end + 20; ++k) {
     const float r0 = plain->Step(zero.data(), next.data()).reward;
     const float r1 = seat->Step(zero.data(), next.data()).reward;
-    const double d2 =
-        (seat->PelvisPosition() - seat->SeatTargetWorld()).head<2>().squaredNorm();
+    const double d2 = (seat->PelvisPosition() - seat->SeatTargetWorld()).head<2>().squaredNorm();
     const bool after = TaskOf(*seat).ClipEnded(seat->episode_step());
     const double want = after ? w * std::exp(-alpha * d2) : 0.0;
     EXPECT_NEAR(r1 - r0, want, 1e-5) << k;
@@ -187,9 +213,8 @@ TEST(SitTask, HoldSeatTermRewardsThePelvisNearTheSeatTargetAfterTheClip) {
 TEST(SitTask, RootPositionTermTracksThePlacedClipsRootPath) {
   const double w = 0.3, alpha = 100.0;
   auto plain = MakeSitEnv(Json{{"reference_state_init", false}});
-  auto track = MakeSitEnv(Json{{"reference_state_init", false},
-                               {"root_pos_weight", w},
-                               {"root_pos_alpha", alpha}});
+  auto track = MakeSitEnv(
+      Json{{"reference_state_init", false}, {"root_pos_weight", w}, {"root_pos_alpha", alpha}});
   std::vector<float> obs(57), next(57), zero(21, 0.0f);
   for (auto* e : {plain.get(), track.get()}) {
     e->Seed(5);
