@@ -42,6 +42,8 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
                   "hold_seat_alpha",
                   "root_pos_weight",
                   "root_pos_alpha",
+                  "pelvis_path_weight",
+                  "pelvis_path_alpha",
                   "energy",
                   "pelvis_end_offset",
                   "clip_seat_height_m",
@@ -80,6 +82,8 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "hold_seat_weight", c.hold_seat_weight, ctx);
   GetOptional(j, "hold_seat_alpha", c.hold_seat_alpha, ctx);
   GetOptional(j, "root_pos_weight", c.root_pos_weight, ctx);
+  GetOptional(j, "pelvis_path_weight", c.pelvis_path_weight, ctx);
+  GetOptional(j, "pelvis_path_alpha", c.pelvis_path_alpha, ctx);
   GetOptional(j, "root_pos_alpha", c.root_pos_alpha, ctx);
   if (j.contains("energy")) c.energy = EnergyCostConfig::FromJson(j["energy"], ctx + ".energy");
   GetOptional(j, "pelvis_end_offset", c.pelvis_end_offset, ctx);
@@ -126,9 +130,9 @@ SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!(c.success_contact_s > 0)) throw ConfigError(ctx + ".success_contact_s: must be > 0");
   if (!(c.eval_episode_s > 0)) throw ConfigError(ctx + ".eval_episode_s: must be > 0");
   if (!(c.max_seat_height_m > 0)) throw ConfigError(ctx + ".max_seat_height_m: must be > 0");
-  for (double w :
-       {c.approach_weight, c.hold_pose_weight, c.hold_energy_weight, c.hold_contact_weight,
-        c.hold_seat_weight, c.hold_seat_alpha, c.root_pos_weight, c.root_pos_alpha}) {
+  for (double w : {c.approach_weight, c.hold_pose_weight, c.hold_energy_weight,
+                   c.hold_contact_weight, c.hold_seat_weight, c.hold_seat_alpha, c.root_pos_weight,
+                   c.root_pos_alpha, c.pelvis_path_weight, c.pelvis_path_alpha}) {
     if (!(w >= 0)) throw ConfigError(ctx + ": reward weights must be >= 0");
   }
   for (double v : c.pelvis_end_offset) {
@@ -153,6 +157,8 @@ Json SitTaskConfig::ToJson() const {
               {"hold_seat_alpha", hold_seat_alpha},
               {"root_pos_weight", root_pos_weight},
               {"root_pos_alpha", root_pos_alpha},
+              {"pelvis_path_weight", pelvis_path_weight},
+              {"pelvis_path_alpha", pelvis_path_alpha},
               {"energy", energy.ToJson()},
               {"pelvis_end_offset", pelvis_end_offset},
               {"clip_seat_height_m", clip_seat_height_m},
@@ -290,7 +296,14 @@ TaskStep SitTask::OnStep(const HumanoidChairEnv& env, const float* action) {
         (env.humanoid_state().root_pos - ReferenceAt(k).root_pos).head<2>().squaredNorm();
     t.root_pos = c_.root_pos_weight * std::exp(-c_.root_pos_alpha * d2);
   }
-  t.total = t.similarity + t.approach + t.energy + t.contact + t.seat + t.root_pos;
+  if (c_.pelvis_path_weight > 0) {
+    const MotionPose ref = ReferenceAt(k);
+    const FkResult fk = ForwardKinematics(env.model(), ref.root_pos, ref.root_rot, ref.q.data());
+    const Eigen::Vector3d d =
+        env.PelvisPosition() - fk.body_world[env.model().pelvis_body()].translation();
+    t.pelvis_path = c_.pelvis_path_weight * std::exp(-c_.pelvis_path_alpha * d.squaredNorm());
+  }
+  t.total = t.similarity + t.approach + t.energy + t.contact + t.seat + t.root_pos + t.pelvis_path;
   terms_ = t;
   m_.prev_distance = ApproachDistance(env);
   RememberPose(env);

@@ -242,6 +242,39 @@ TEST(SitTask, RootPositionTermTracksThePlacedClipsRootPath) {
   EXPECT_THROW(MakeSitEnv(Json{{"root_pos_weight", -1.0}}), ConfigError);
 }
 
+TEST(SitTask, PelvisPathTermTracksThePlacedClipsPelvisIn3D) {
+  const double w = 0.5, alpha = 100.0;
+  auto plain = MakeSitEnv(Json{{"reference_state_init", false}});
+  auto track = MakeSitEnv(Json{
+      {"reference_state_init", false}, {"pelvis_path_weight", w}, {"pelvis_path_alpha", alpha}});
+  std::vector<float> obs(57), next(57), zero(21, 0.0f);
+  for (auto* e : {plain.get(), track.get()}) {
+    e->Seed(5);
+    e->Reset(obs.data());
+  }
+  const int pelvis = track->model().pelvis_body();
+  double first = -1, last = -1;
+  for (int k = 1; k <= 40; ++k) {
+    const StepResult a = plain->Step(zero.data(), next.data());
+    const StepResult b = track->Step(zero.data(), next.data());
+    if (a.terminated || b.terminated) break;
+    const MotionPose ref = TaskOf(*track).ReferenceAt(k);
+    const FkResult fk = ForwardKinematics(track->model(), ref.root_pos, ref.root_rot, ref.q.data());
+    const double d2 = (track->PelvisPosition() - fk.body_world[pelvis].translation()).squaredNorm();
+    const double want = w * std::exp(-alpha * d2);
+    EXPECT_NEAR(TaskOf(*track).last_terms().pelvis_path, want, 1e-9) << k;
+    EXPECT_NEAR(b.reward - a.reward, want, 1e-5) << k;
+    if (first < 0) first = want;
+    last = want;
+  }
+  // Standing on the clip's first frame it pays nearly its weight; a limp body drops below the
+  // clip's pelvis and it pays less.
+  EXPECT_GT(first, 0.9 * w);
+  EXPECT_LT(last, 0.8 * first);
+  EXPECT_EQ(SitTaskConfig().pelvis_path_weight, 0.0);
+  EXPECT_THROW(MakeSitEnv(Json{{"pelvis_path_alpha", -1.0}}), ConfigError);
+}
+
 TEST(SitTask, TerminatesBelowItsOwnRootHeight) {
   // The start (root about 1.28 m) is above both thresholds; a threshold above it ends at once.
   std::vector<float> obs(57), next(57), zero(21, 0.0f);
