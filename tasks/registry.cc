@@ -18,10 +18,22 @@ void CheckBanks(const BankStartConfig& start, const TaskEnvConfig& c, const std:
   if (start.banks.empty()) return;
   const HumanoidModel model = HumanoidModel::Load(c.env.HumanoidPath());
   for (const std::string& b : start.banks) {
+    proto::StateBank bank;
     try {
-      ReadStateBank(ResolveProjectPath(b), &model);
+      bank = ReadStateBank(ResolveProjectPath(b), &model);
     } catch (const ConfigError& e) {
       throw ConfigError(ctx + ".start.banks: " + e.what());
+    }
+    // keep_pose places each state relative to its own chair: a bank without one is refused
+    // here, at start-up, rather than at the first episode that draws it.
+    if (start.keep_pose) {
+      for (const proto::BankState& st : bank.states()) {
+        if (!st.has_chair()) {
+          throw ConfigError(ctx + ".start.keep_pose: " + b +
+                            " holds states without a chair (sample them in the chain: perch "
+                            "eval --task chain --chain-save-sit-starts)");
+        }
+      }
     }
   }
 }

@@ -275,6 +275,23 @@ TEST(SitTask, PelvisPathTermTracksThePlacedClipsPelvisIn3D) {
   EXPECT_THROW(MakeSitEnv(Json{{"pelvis_path_alpha", -1.0}}), ConfigError);
 }
 
+TEST(SitTask, KeepPoseIsRefusedAtConfigTimeForABankWithoutChairs) {
+  // The walk bank has no chair in its states: a sit that keeps bank poses relative to the
+  // chair cannot use it, and says so when the config is read (--check-config), naming both.
+  const Json start{{"banks", {"data/banks/walk_end_poses_eval.bin"}}, {"prob", 0.5}};
+  Json keep = start;
+  keep["keep_pose"] = true;
+  try {
+    MakeSitEnv(Json{{"start", keep}});
+    FAIL() << "accepted";
+  } catch (const ConfigError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("sit.start.keep_pose"), std::string::npos) << m;
+    EXPECT_NE(m.find("walk_end_poses_eval.bin"), std::string::npos) << m;
+  }
+  EXPECT_NO_THROW(MakeSitEnv(Json{{"start", start}}));  // placed at the clip's frame 0: fine
+}
+
 TEST(SitTask, TerminatesBelowItsOwnRootHeight) {
   // The start (root about 1.28 m) is above both thresholds; a threshold above it ends at once.
   std::vector<float> obs(57), next(57), zero(21, 0.0f);
