@@ -337,15 +337,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         if (sit_starts.empty())
           throw ConfigError("--chain-save-sit-starts: no episode reached sit");
         const HumanoidModel model = HumanoidModel::Load(config.env.HumanoidPath());
-        proto::StateBank bank;
-        bank.set_format_version(kStateBankFormat);
-        bank.set_task("chain");
+        proto::StateBank bank =
+            NewStateBank("chain", model, o->eval.seed, o->eval.stochastic, config.ToJson());
         bank.set_model_path(files[kWalk] + "," + files[kLeftTurn] + "," + files[kRightTurn]);
-        for (int j = 0; j < model.num_joints(); ++j) bank.add_joint_names(model.joint(j).name);
         bank.set_count(static_cast<int>(sit_starts.size()));
-        bank.set_seed(o->eval.seed);
-        bank.set_stochastic(o->eval.stochastic);
-        bank.set_env_config_json(config.ToJson().dump());
         bank.set_episodes_run(o->eval.episodes);
         for (proto::BankState& b : sit_starts) *bank.add_states() = std::move(b);
         WriteStateBank(chain->save_sit_starts, bank, o->force);

@@ -245,19 +245,12 @@ proto::StateBank SampleEndPoses(const TaskEnvConfig& config, const proto::ModelW
     }
   }
   for (auto& t : threads) t.join();
-  proto::StateBank bank;
-  bank.set_format_version(kStateBankFormat);
-  bank.set_task(config.env.task);
+  proto::StateBank bank =
+      NewStateBank(config.env.task, envs[0]->model(), o.seed, o.stochastic, config.ToJson());
   bank.set_model_version(weights.version());
-  for (int j = 0; j < envs[0]->model().num_joints(); ++j) {
-    bank.add_joint_names(envs[0]->model().joint(j).name);
-  }
   bank.set_steps(o.steps);
   bank.set_survive(o.survive);
   bank.set_count(o.count);
-  bank.set_seed(o.seed);
-  bank.set_stochastic(o.stochastic);
-  bank.set_env_config_json(config.ToJson().dump());
   // The first `count` survivors by episode index: the same whatever the workers did beyond.
   int64_t episodes = 0;
   for (auto& [e, s] : done) {
@@ -267,6 +260,18 @@ proto::StateBank SampleEndPoses(const TaskEnvConfig& config, const proto::ModelW
   }
   bank.set_episodes_run(episodes);
   if (o.progress) o.progress(bank.states_size(), episodes);
+  return bank;
+}
+
+proto::StateBank NewStateBank(const std::string& task, const HumanoidModel& model, uint64_t seed,
+                              bool stochastic, const Json& env_config) {
+  proto::StateBank bank;
+  bank.set_format_version(kStateBankFormat);
+  bank.set_task(task);
+  for (int j = 0; j < model.num_joints(); ++j) bank.add_joint_names(model.joint(j).name);
+  bank.set_seed(seed);
+  bank.set_stochastic(stochastic);
+  bank.set_env_config_json(env_config.dump());
   return bank;
 }
 

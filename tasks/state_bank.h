@@ -27,6 +27,11 @@ proto::StateBank ReadStateBank(const std::string& path, const HumanoidModel* mod
 // Writes atomically; refuses to replace an existing file unless overwrite.
 void WriteStateBank(const std::string& path, const proto::StateBank& bank, bool overwrite);
 
+// A bank's header (format, task, the model's joint layout, seed, sampling mode, resolved env
+// config); the sampler fills in its own fields (steps, survive, count, states).
+proto::StateBank NewStateBank(const std::string& task, const HumanoidModel& model, uint64_t seed,
+                              bool stochastic, const Json& env_config);
+
 // The env's state and its task's memory, and back (the inverse restores the episode exactly).
 proto::BankState CaptureState(const HumanoidChairEnv& env);
 EnvState EnvStateOf(const proto::BankState& b);
