@@ -144,7 +144,8 @@ TEST_F(CliTest, SitEvalReportsWhereTheSeatedBodyIsAndTheBackrestPushesItForward)
   // reward tracks joint angles, and the body is shifted, not tilted).
   const std::string src = PERCH_SOURCE_DIR;
   const std::string base =
-      "eval --model " + src + "/models/sit/policy.bin --episodes 3 --seed 13 --json";
+      "eval --model " + src +
+      "/models/sit/checkpoints/sit_contact-0000000296.bin --episodes 3 --seed 13 --json";
   Result r = Perch(base, false);
   ASSERT_EQ(r.code, 0) << r.out;
   const Json a = Json::parse(r.out);
