@@ -211,6 +211,7 @@ class SitMetrics : public EpisodeMetrics {
   }
   void Start(const HumanoidChairEnv& env) override {
     run_ = 0;
+    longest_run_ = 0;
     success_ = false;
     min_dist_ = env.PelvisSeatDistance();
     first_contact_s_ = -1;
@@ -220,6 +221,8 @@ class SitMetrics : public EpisodeMetrics {
     min_dist_ = std::min(min_dist_, env.PelvisSeatDistance());
     const bool contact = env.PelvisSeatContact();
     run_ = contact ? run_ + 1 : 0;
+    longest_run_ = std::max(longest_run_, run_);
+    dt_ = t.control_dt();
     if (contact && first_contact_s_ < 0) first_contact_s_ = env.episode_step() * t.control_dt();
     const int need =
         static_cast<int>(std::ceil(t.config().success_contact_s / t.control_dt() - 1e-9));
@@ -243,6 +246,12 @@ class SitMetrics : public EpisodeMetrics {
   }
   bool Finish(const HumanoidChairEnv& env, bool fell) override {
     min_dists_.push_back(min_dist_);
+    if (!success_) {
+      // How a failure failed: never on the seat, or on it but not for the whole 3 s.
+      failed_longest_contact_s_.push_back(longest_run_ * dt_);
+      if (longest_run_ == 0) ++failed_never_in_contact_;
+      if (fell) ++failed_fell_;
+    }
     return success_;
   }
   double ImitationReward(const HumanoidChairEnv& env) const override {
@@ -258,6 +267,9 @@ class SitMetrics : public EpisodeMetrics {
     (*j)["first_contact_s_mean"] = MeanOf(time_to_sit_s_);
     (*j)["min_dist_mean_m"] = MeanOf(min_dists_);
     (*j)["min_dist_std_m"] = StdOf(min_dists_);
+    (*j)["failures"] = Json{{"fell", failed_fell_},
+                            {"never_in_seat_contact", failed_never_in_contact_},
+                            {"longest_contact_s_mean", MeanOf(failed_longest_contact_s_)}};
   }
 
  private:
@@ -268,7 +280,11 @@ class SitMetrics : public EpisodeMetrics {
   bool success_ = false;
   double min_dist_ = 0, first_contact_s_ = -1;
   std::vector<double> pos_err_cm_, rot_err_deg_, time_to_sit_s_, min_dists_;
-  std::vector<double> pitch_dev_deg_;              // [deg] per success
+  std::vector<double> pitch_dev_deg_;  // [deg] per success
+  int longest_run_ = 0;                // this episode's longest seat contact [control steps]
+  double dt_ = 0.0;                    // [s]
+  int failed_fell_ = 0, failed_never_in_contact_ = 0;
+  std::vector<double> failed_longest_contact_s_;   // [s] per failed episode
   std::vector<double> offset_x_cm_, offset_y_cm_;  // [cm] chair frame
 };
 

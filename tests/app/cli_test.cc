@@ -161,6 +161,10 @@ TEST_F(CliTest, SitEvalReportsWhereTheSeatedBodyIsAndTheBackrestPushesItForward)
   EXPECT_GE(err + 1e-9, std::abs(ax));  // the horizontal error includes the forward offset
   for (const Json* j : {&a, &b}) {
     EXPECT_LT(std::abs((*j)["seat_torso_pitch_vs_clip_deg_mean"].get<double>()), 5.0) << *j;
+    // Failures are counted by how they failed, and only failures are.
+    const int failed = (*j)["episodes"].get<int>() - (*j)["successes"].get<int>();
+    EXPECT_LE((*j)["failures"]["fell"].get<int>(), failed);
+    EXPECT_LE((*j)["failures"]["never_in_seat_contact"].get<int>(), failed);
   }
 }
 

@@ -70,6 +70,12 @@ TEST(TaskEval, UntrainedPoliciesNeitherTurnNorSit) {
         GetTask(name, "t").evaluate(c, Untrained(ObsLayoutDim(c.env.obs_layout), 1), o, nullptr);
     EXPECT_EQ(j["success_rate"].get<double>(), 0.0);
     EXPECT_GT(j["fall_rate"].get<double>(), 0.0);
+    if (std::string(name) == "sit") {
+      // Every episode failed; each fall among them is counted as a failure that fell.
+      EXPECT_EQ(j["failures"]["fell"].get<int>(),
+                static_cast<int>(std::lround(j["fall_rate"].get<double>() * o.episodes)));
+      EXPECT_GE(j["failures"]["longest_contact_s_mean"].get<double>(), 0.0);
+    }
     if (std::string(name) == "turn_left") {
       // Every early termination is attributed to exactly one rule.
       const Json& by = j["terminations_by_rule"];
