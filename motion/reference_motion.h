@@ -65,19 +65,17 @@ class ReferenceMotion {
   // flips signs from the joint axes. Mirroring twice gives the original motion.
   ReferenceMotion Mirrored(const HumanoidModel& model) const;
   static MotionPose MirrorPose(const MotionPose& p, const HumanoidModel& model);
-  // Sitting up straighter (ours, for the sit clip): the pelvis and legs rotated forward against the
-  // torso by deg(t) about the abdomen's flexion joint (abdomen_y + deg, both hip_y - deg, so the
-  // thighs keep their direction), the torso keeping its orientation, and the root moved so the
-  // pelvis stays where it was. deg(t) ramps linearly from 0 at t0 to `deg` at t1 [s] and holds.
-  // Velocities recomputed. ConfigError when the model lacks those joints or t1 <= t0.
   // How far body's geoms reach behind (-x of) the pelvis centre in pose p [m, >= 0 behind]: the
   // seated clip's clearance from a backrest (the sit clip faces +x).
   static double ReachBehindPelvis(const HumanoidModel& model, const MotionPose& p,
                                   const std::string& body);
-  // keep = "torso": the torso keeps its world orientation, the pelvis its place; the hips turn
-  // back by DEG so the legs keep theirs (the lower body rotates forward under the torso).
-  // keep = "pelvis": the pelvis and legs keep their world pose; abdomen_y - DEG, and the torso
-  // pitches forward about the waist (the upper body sits up, nothing below the waist moves).
+  // Sitting up straighter (ours, for the sit clip), by deg(t) about the abdomen's flexion joint;
+  // deg(t) ramps linearly from 0 at t0 to `deg` at t1 [s] and holds. Velocities recomputed.
+  // keep = "torso": abdomen_y + deg, both hip_y - deg: the pelvis and legs rotate forward under
+  // the torso, which keeps its orientation, the thighs their direction, and the root moves so
+  // the pelvis stays where it was. keep = "pelvis": abdomen_y - deg, the pelvis and legs keep
+  // their world pose and the torso pitches forward about the waist (nothing below it moves).
+  // ConfigError when the model lacks those joints, t1 <= t0, or keep is neither.
   ReferenceMotion Straightened(const HumanoidModel& model, double deg, double t0, double t1,
                                const std::string& keep = "torso") const;
 

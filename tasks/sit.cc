@@ -277,12 +277,13 @@ TaskStep SitTask::OnStep(const HumanoidChairEnv& env, const float* action) {
   t.pose = sim.pose;
   t.joint_vel = sim.joint_vel;
   t.seat_distance_m = env.PelvisSeatDistance();
+  const double approach_distance = ApproachDistance(env);
   if (c_.hold_phase && ClipEnded(k)) {
     t.similarity = c_.hold_pose_weight * t.pose;
     t.energy = c_.hold_energy_weight * EnergyCost(c_.energy, env, action);
   } else {
     t.similarity = sim.total;
-    t.approach = ApproachReward(m_.prev_distance, ApproachDistance(env), dt_, c_.approach_weight);
+    t.approach = ApproachReward(m_.prev_distance, approach_distance, dt_, c_.approach_weight);
   }
   if (c_.hold_contact_weight > 0 && ClipEnded(k) && env.PelvisSeatContact()) {
     t.contact = c_.hold_contact_weight;
@@ -305,7 +306,7 @@ TaskStep SitTask::OnStep(const HumanoidChairEnv& env, const float* action) {
   }
   t.total = t.similarity + t.approach + t.energy + t.contact + t.seat + t.root_pos + t.pelvis_path;
   terms_ = t;
-  m_.prev_distance = ApproachDistance(env);
+  m_.prev_distance = approach_distance;
   RememberPose(env);
   TaskStep r;
   r.reward = static_cast<float>(t.total);

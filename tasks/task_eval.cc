@@ -222,7 +222,6 @@ class SitMetrics : public EpisodeMetrics {
     const bool contact = env.PelvisSeatContact();
     run_ = contact ? run_ + 1 : 0;
     longest_run_ = std::max(longest_run_, run_);
-    dt_ = t.control_dt();
     if (contact && first_contact_s_ < 0) first_contact_s_ = env.episode_step() * t.control_dt();
     const int need =
         static_cast<int>(std::ceil(t.config().success_contact_s / t.control_dt() - 1e-9));
@@ -237,8 +236,8 @@ class SitMetrics : public EpisodeMetrics {
       const double yaw = env.RootRpy().z();
       rot_err_deg_.push_back(std::abs(AngleDiff(yaw, SitTask::ChairYaw(env))) * 180.0 / M_PI);
       time_to_sit_s_.push_back(first_contact_s_);
-      // The torso's pitch against the clip's seated pitch (+: leaning further back than the
-      // clip): the pose reward tracks joint angles only, so the whole body may tilt.
+      // The torso's pitch against the clip's seated pitch (+: tilted forward, more upright than
+      // the clip): the pose reward tracks joint angles only, so the whole body may tilt.
       const MotionPose end = t.ReferenceAt(t.ClipEndStep());
       const double pitch_ref = RpyFromQuat(end.root_rot).y();
       pitch_dev_deg_.push_back(AngleDiff(env.RootRpy().y(), pitch_ref) * 180.0 / M_PI);
@@ -248,7 +247,7 @@ class SitMetrics : public EpisodeMetrics {
     min_dists_.push_back(min_dist_);
     if (!success_) {
       // How a failure failed: never on the seat, or on it but not for the whole 3 s.
-      failed_longest_contact_s_.push_back(longest_run_ * dt_);
+      failed_longest_contact_s_.push_back(longest_run_ * Task(env).control_dt());
       if (longest_run_ == 0) ++failed_never_in_contact_;
       if (fell) ++failed_fell_;
     }
@@ -282,7 +281,6 @@ class SitMetrics : public EpisodeMetrics {
   std::vector<double> pos_err_cm_, rot_err_deg_, time_to_sit_s_, min_dists_;
   std::vector<double> pitch_dev_deg_;  // [deg] per success
   int longest_run_ = 0;                // this episode's longest seat contact [control steps]
-  double dt_ = 0.0;                    // [s]
   int failed_fell_ = 0, failed_never_in_contact_ = 0;
   std::vector<double> failed_longest_contact_s_;   // [s] per failed episode
   std::vector<double> offset_x_cm_, offset_y_cm_;  // [cm] chair frame

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include "common/paths.h"
@@ -210,11 +211,16 @@ TEST(SitTask, HoldSeatTermRewardsThePelvisNearTheSeatTargetAfterTheClip) {
   EXPECT_EQ(SitTaskConfig().hold_seat_weight, 0.0);
 }
 
-TEST(SitTask, RootPositionTermTracksThePlacedClipsRootPath) {
-  const double w = 0.3, alpha = 100.0;
+// Steps a plain sit env and one with `extra` fields side by side from the clip's first frame
+// with zero torques for up to 40 steps; for each step k before either ends, `want(k, env)` is the
+// term the extra fields should add and `term(env)` the one the env reports. Returns the first
+// and last values of `want`.
+template <class Want, class Term>
+std::pair<double, double> StepBesidePlain(const Json& extra, Want want, Term term) {
+  Json section{{"reference_state_init", false}};
+  section.update(extra);
   auto plain = MakeSitEnv(Json{{"reference_state_init", false}});
-  auto track = MakeSitEnv(
-      Json{{"reference_state_init", false}, {"root_pos_weight", w}, {"root_pos_alpha", alpha}});
+  auto track = MakeSitEnv(section);
   std::vector<float> obs(57), next(57), zero(21, 0.0f);
   for (auto* e : {plain.get(), track.get()}) {
     e->Seed(5);
@@ -225,15 +231,26 @@ TEST(SitTask, RootPositionTermTracksThePlacedClipsRootPath) {
     const StepResult a = plain->Step(zero.data(), next.data());
     const StepResult b = track->Step(zero.data(), next.data());
     if (a.terminated || b.terminated) break;
-    const double d2 = (track->humanoid_state().root_pos - TaskOf(*track).ReferenceAt(k).root_pos)
-                          .head<2>()
-                          .squaredNorm();
-    const double want = w * std::exp(-alpha * d2);
-    EXPECT_NEAR(TaskOf(*track).last_terms().root_pos, want, 1e-9) << k;
-    EXPECT_NEAR(b.reward - a.reward, want, 1e-5) << k;
-    if (first < 0) first = want;
-    last = want;
+    const double w = want(k, *track);
+    EXPECT_NEAR(term(*track), w, 1e-9) << k;
+    EXPECT_NEAR(b.reward - a.reward, w, 1e-5) << k;
+    if (first < 0) first = w;
+    last = w;
   }
+  return {first, last};
+}
+
+TEST(SitTask, RootPositionTermTracksThePlacedClipsRootPath) {
+  const double w = 0.3, alpha = 100.0;
+  const auto [first, last] = StepBesidePlain(
+      Json{{"root_pos_weight", w}, {"root_pos_alpha", alpha}},
+      [&](int k, const HumanoidChairEnv& env) {
+        const double d2 = (env.humanoid_state().root_pos - TaskOf(env).ReferenceAt(k).root_pos)
+                              .head<2>()
+                              .squaredNorm();
+        return w * std::exp(-alpha * d2);
+      },
+      [](const HumanoidChairEnv& env) { return TaskOf(env).last_terms().root_pos; });
   // At the start the humanoid stands on the clip's first frame: the term pays nearly its weight;
   // zero torques leave the clip's path, and it pays less.
   EXPECT_GT(first, 0.9 * w);
@@ -244,29 +261,18 @@ TEST(SitTask, RootPositionTermTracksThePlacedClipsRootPath) {
 
 TEST(SitTask, PelvisPathTermTracksThePlacedClipsPelvisIn3D) {
   const double w = 0.5, alpha = 100.0;
-  auto plain = MakeSitEnv(Json{{"reference_state_init", false}});
-  auto track = MakeSitEnv(Json{
-      {"reference_state_init", false}, {"pelvis_path_weight", w}, {"pelvis_path_alpha", alpha}});
-  std::vector<float> obs(57), next(57), zero(21, 0.0f);
-  for (auto* e : {plain.get(), track.get()}) {
-    e->Seed(5);
-    e->Reset(obs.data());
-  }
-  const int pelvis = track->model().pelvis_body();
-  double first = -1, last = -1;
-  for (int k = 1; k <= 40; ++k) {
-    const StepResult a = plain->Step(zero.data(), next.data());
-    const StepResult b = track->Step(zero.data(), next.data());
-    if (a.terminated || b.terminated) break;
-    const MotionPose ref = TaskOf(*track).ReferenceAt(k);
-    const FkResult fk = ForwardKinematics(track->model(), ref.root_pos, ref.root_rot, ref.q.data());
-    const double d2 = (track->PelvisPosition() - fk.body_world[pelvis].translation()).squaredNorm();
-    const double want = w * std::exp(-alpha * d2);
-    EXPECT_NEAR(TaskOf(*track).last_terms().pelvis_path, want, 1e-9) << k;
-    EXPECT_NEAR(b.reward - a.reward, want, 1e-5) << k;
-    if (first < 0) first = want;
-    last = want;
-  }
+  const auto [first, last] = StepBesidePlain(
+      Json{{"pelvis_path_weight", w}, {"pelvis_path_alpha", alpha}},
+      [&](int k, const HumanoidChairEnv& env) {
+        const MotionPose ref = TaskOf(env).ReferenceAt(k);
+        const FkResult fk =
+            ForwardKinematics(env.model(), ref.root_pos, ref.root_rot, ref.q.data());
+        const double d2 =
+            (env.PelvisPosition() - fk.body_world[env.model().pelvis_body()].translation())
+                .squaredNorm();
+        return w * std::exp(-alpha * d2);
+      },
+      [](const HumanoidChairEnv& env) { return TaskOf(env).last_terms().pelvis_path; });
   // Standing on the clip's first frame it pays nearly its weight; a limp body drops below the
   // clip's pelvis and it pays less.
   EXPECT_GT(first, 0.9 * w);
