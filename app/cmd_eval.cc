@@ -21,6 +21,7 @@
 #include "tasks/local_train.h"
 #include "tasks/meta_env.h"
 #include "tasks/meta_eval.h"
+#include "tasks/meta_expert.h"
 #include "tasks/model_source.h"
 #include "tasks/registry.h"
 #include "tasks/state_bank.h"
@@ -161,6 +162,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     bool json = false;
     int trials = 0;
     std::string matrix_png;
+    bool planner = false;  // sit_chair: the scripted planner decides (no --model)
     int threads = std::max(1u, std::thread::hardware_concurrency());
   };
   auto o = std::make_shared<EvalOpts>();
@@ -233,6 +235,9 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   cmd->add_option("--trials", o->trials,
                   "sit_chair (the meta controller): number of trials (default: --episodes)")
       ->check(CLI::Range(1, 10000000));
+  cmd->add_flag("--planner", o->planner,
+                "sit_chair: the scripted planner of the config's sit_chair.meta.planner decides "
+                "instead of a meta policy (tasks/meta_expert.h); needs --config, no --model");
   cmd->add_option("--matrix-png", o->matrix_png,
                   "sit_chair: draw the subtask transition matrices (per start side) here");
   cmd->add_option("--threads", o->threads, "sit_chair: threads (default: all cores)")
@@ -262,6 +267,28 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "(with the chair; for sit's start.keep_pose)");
   cmd->add_flag("--chain-stop-at-sit", chain->options.stop_at_sit,
                 "chain: end each episode at the switch to sit (sampling sit starts only)");
+  cmd->add_flag("--chain-plan", chain->options.plan,
+                "chain: the planned hand-over (walk so that the turn ends where the sit's clip "
+                "starts; tasks/chain_plan.h)");
+  cmd->add_option("--chain-plan-reach-m", chain->options.planner.reach_m,
+                  "chain plan: hand over when the predicted turn end is this close [m]")
+      ->check(CLI::Range(0.0, 2.0));
+  cmd->add_option("--chain-plan-pass-m", chain->options.planner.pass_m,
+                  "chain plan: or at the closest approach within this [m]")
+      ->check(CLI::Range(0.0, 3.0));
+  cmd->add_option("--chain-plan-lookahead-m", chain->options.planner.lookahead_m,
+                  "chain plan: the walk target is never nearer than this [m]")
+      ->check(CLI::Range(0.0, 5.0));
+  cmd->add_option("--chain-plan-aim-m", chain->options.planner.aim_m,
+                  "chain plan: aim the turn's end this far from the sit clip's start (along the "
+                  "chair's facing, across to its left) [m]");
+  cmd->add_option("--chain-plan-calibration-runs", chain->options.planner.calibration_runs,
+                  "chain plan: turn runs measured to learn each turn's path")
+      ->check(CLI::Range(1, 1000));
+  cmd->add_option("--chain-decision-period", chain->options.decision_period,
+                  "chain: switch (and move the walk target) only every this many control steps "
+                  "(30: a meta controller's 2 Hz)")
+      ->check(CLI::Range(1, 990));
   cmd->add_option("--chain-side", chain->options.side,
                   "chain: which turn (short: the short way round to the chair's facing)")
       ->capture_default_str()
@@ -369,8 +396,17 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       }
       return;
     }
-    if (o->model.empty()) throw ConfigError("--model: required (but for --task chain)");
+    if (o->planner && (!o->model.empty() || o->cfg.config_path.empty())) {
+      throw ConfigError("--planner: needs --config (the sit_chair experiment) and no --model");
+    }
+    if (o->model.empty() && !o->planner) {
+      throw ConfigError("--model: required (but for --task chain and --planner)");
+    }
     const TaskEnvConfig config = ResolveConfig(o->cfg, o->model);
+    if (o->planner && config.env.task != "sit_chair") {
+      throw ConfigError("--planner: only for the sit_chair task, the config's is \"" +
+                        config.env.task + "\"");
+    }
     if (config.env.task == "sit_chair") {
       // The meta controller on the main task: the authors' zones as defined (whatever spawn the
       // run trained with), walk start states from the evaluation bank (docs/meta.md).
@@ -378,10 +414,15 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       mc.env.spawn = SpawnConfig();
       mc.env.spawn.zone = chain->zone;
       mc.MutableSection<SitChairTaskConfig>().start.banks = {"data/banks/walk_end_poses_eval.bin"};
-      const std::string model_file = ModelFile(o->model);
-      std::vector<FrozenPolicyData> frozen = FrozenPoliciesIn(o->model);
+      const std::string model_file = o->planner ? "" : ModelFile(o->model);
+      std::vector<FrozenPolicyData> frozen;
+      if (!o->planner) frozen = FrozenPoliciesIn(o->model);
       if (frozen.empty()) frozen = LoadFrozenPolicies(mc);
       MetaEvalOptions mo;
+      if (o->planner) {
+        mo.planner = std::make_shared<const MetaPlan>(
+            BuildMetaPlan(mc, frozen, mc.Section<SitChairTaskConfig>().meta.planner));
+      }
       mo.trials = o->trials > 0 ? o->trials : o->eval.episodes;
       mo.seed = o->eval.seed;
       mo.stochastic = o->eval.stochastic;
@@ -398,9 +439,9 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       };
       MetaTrialFrames ok, bad;
       const bool film = !o->filmstrip.empty();
-      Json result = EvaluateMeta(mc, LoadModelFile(model_file), frozen, mo, film ? &ok : nullptr,
-                                 film ? &bad : nullptr);
-      result["model"] = model_file;
+      Json result = EvaluateMeta(mc, o->planner ? proto::ModelWeights() : LoadModelFile(model_file),
+                                 frozen, mo, film ? &ok : nullptr, film ? &bad : nullptr);
+      result["model"] = o->planner ? Json("planner") : Json(model_file);
       result["wall_s"] =
           std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       if (film) {

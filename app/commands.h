@@ -16,6 +16,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& bench);     // app/cmd_eval.
 void RegisterProfileCommands(CLI::App& root, CLI::App& bench);  // app/cmd_profile.cc
 void RegisterViewCommands(CLI::App& root, CLI::App& bench);     // app/cmd_view.cc
 void RegisterInfoCommands(CLI::App& root, CLI::App& bench);     // app/cmd_info.cc
+void RegisterMetaCommands(CLI::App& root, CLI::App& bench);     // app/cmd_meta.cc
 void RegisterFuzzCommand(CLI::App& root);                          // app/cmd_fuzz.cc
 
 }  // namespace perch

@@ -32,6 +32,7 @@ int main(int argc, char** argv) {
   perch::RegisterProfileCommands(app, *bench);
   perch::RegisterViewCommands(app, *bench);
   perch::RegisterInfoCommands(app, *bench);
+  perch::RegisterMetaCommands(app, *bench);
   perch::RegisterFuzzCommand(app);
   perch::RateLimitProtobufLogs();
   try {

@@ -1,10 +1,12 @@
 #include "tasks/hierarchy.h"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 
 #include "common/paths.h"
 #include "envs/spawn.h"
+#include "tasks/chain_plan.h"
 #include "tasks/imitation.h"
 #include "tasks/state_bank.h"
 #include "tasks/task_env.h"
@@ -38,7 +40,7 @@ MetaConfig MetaConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
   CheckKnownKeys(j,
                  {"choices", "period", "subtask_stochastic", "fixed_order", "observe_active",
-                  "active_time_scale_s", "subtasks"},
+                  "active_time_scale_s", "subtasks", "planner"},
                  ctx);
   MetaConfig c;
   GetOptional(j, "choices", c.choices, ctx);
@@ -47,6 +49,7 @@ MetaConfig MetaConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "fixed_order", c.fixed_order, ctx);
   GetOptional(j, "observe_active", c.observe_active, ctx);
   GetOptional(j, "active_time_scale_s", c.active_time_scale_s, ctx);
+  if (j.contains("planner")) c.planner = PlannerConfig::FromJson(j["planner"], ctx + ".planner");
   if (!(c.active_time_scale_s > 0)) throw ConfigError(ctx + ".active_time_scale_s: must be > 0");
   if (j.contains("subtasks")) {
     const Json& s = j["subtasks"];
@@ -89,6 +92,7 @@ Json MetaConfig::ToJson() const {
               {"subtask_stochastic", subtask_stochastic},
               {"observe_active", observe_active},
               {"active_time_scale_s", active_time_scale_s},
+              {"planner", planner.ToJson()},
               {"subtasks", subs}};
 }
 
@@ -293,8 +297,36 @@ Json EvaluateChain(const TaskEnvConfig& config,
   const double chair_yaw = config.env.chair_placement.yaw;
   const Eigen::Vector2d facing(std::cos(chair_yaw), std::sin(chair_yaw));
   std::vector<float> obs(env->spec().obs_dim), action(21);
+  if (o.decision_period < 1) throw ConfigError("chain: decision period must be >= 1");
+  // The planned hand-over: where the sit starts, how each turn moves (tasks/chain_plan.h).
+  PlanarPose sit_start;
+  std::array<TurnCalibration, 2> calibration;
+  PlanRule rule;
+  if (o.plan) {
+    sit_start =
+        SitClipStart(saved_configs[kSit], config.env, "chain plan: sit policy " + paths[kSit]);
+    sit_start.xy +=
+        Eigen::Rotation2Dd(chair_yaw) * Eigen::Vector2d(o.planner.aim_m[0], o.planner.aim_m[1]);
+    for (int side = 0; side < 2; ++side) {
+      const int id = side == 0 ? kLeftTurn : kRightTurn;
+      task.set_active(id);
+      calibration[side] = CalibrateTurn(*env, policies, id, o.planner.calibration_runs,
+                                        o.planner.calibration_seed, o.turn_s);
+    }
+    rule.reach_m = o.planner.reach_m;
+    rule.pass_m = o.planner.pass_m;
+    rule.lookahead_m = o.planner.lookahead_m;
+    rule.tolerance_rad = o.sit_yaw_deg * M_PI / 180.0;
+  }
+  const double sit_yaw = o.plan ? sit_start.yaw : chair_yaw;
   int successes = 0, falls = 0, left_turns = 0, right_turns = 0, sits = 0;
+  std::array<int, kNumSubtasks> falls_in{};  // by the subtask acting when the episode ended
+  // Per episode: spawn azimuth [deg], the turn taken, the subtask it fell in ("" none), success.
+  Json per_episode = Json::array();
   std::vector<double> min_dists, sit_times;
+  // Where the sits began relative to where the sit's clip starts (chair frame) [m], [deg]; the
+  // predicted hand-over error when the turn began [m].
+  std::vector<double> start_along, start_across, start_yaw_deg, handover_err;
   for (int e = 0; e < o.episodes; ++e) {
     const uint64_t episode_seed = o.seed * 1000003ULL + static_cast<uint64_t>(e);
     env->Seed(2 * episode_seed);
@@ -303,6 +335,10 @@ Json EvaluateChain(const TaskEnvConfig& config,
     const Eigen::Vector2d target = env->SeatTargetWorld().head<2>() + o.approach_dist_m * facing;
     env->SetWalkTarget(target);
     int phase = kWalk, phase_start = 0, run = 0, begun = -1;
+    std::string turn_taken;
+    const bool plan_left = o.side == "left"    ? true
+                           : o.side == "right" ? false
+                                               : AngleDiff(sit_start.yaw, env->RootRpy().z()) >= 0;
     if (o.recorder != nullptr) {
       RecordingExtras x;
       x.active_subtask = phase;
@@ -312,9 +348,27 @@ Json EvaluateChain(const TaskEnvConfig& config,
     bool success = false, fell = false;
     for (int k = 0; k < max_steps; ++k) {
       // Fixed switching rules (docs/subtasks.md "The scripted chain").
-      if (phase == kWalk) {
+      const bool decide = k % o.decision_period == 0;
+      const bool walk_timeout = (k - phase_start) * dt >= o.max_walk_s;
+      if (phase == kWalk && o.plan) {
+        if (decide) {
+          const PlanarPose root{env->humanoid_state().root_pos.head<2>(), env->RootRpy().z()};
+          const PlanView v =
+              PlanStep(root, sit_start, calibration[plan_left ? 0 : 1], plan_left, rule);
+          env->SetWalkTarget(v.walk_target);
+          const bool now = HandOverNow(v, env->humanoid_state().root_lin_vel.head<2>(),
+                                       o.decision_period * dt, sit_start.xy, rule);
+          if (now || walk_timeout) {
+            phase = plan_left ? kLeftTurn : kRightTurn;
+            turn_taken = SubtaskName(phase);
+            (plan_left ? left_turns : right_turns) += 1;
+            phase_start = k;
+            handover_err.push_back(v.error_m);
+          }
+        }
+      } else if (phase == kWalk) {
         const bool reached = (env->BodyXyz().head<2>() - target).norm() < o.reach_m;
-        if (reached || (k - phase_start) * dt >= o.max_walk_s) {
+        if (decide && (reached || walk_timeout)) {
           // Turn towards the chair's facing direction the short way round.
           const double err = AngleDiff(chair_yaw, env->RootRpy().z());
           phase = o.side == "left"    ? kLeftTurn
@@ -322,15 +376,25 @@ Json EvaluateChain(const TaskEnvConfig& config,
                   : err >= 0          ? kLeftTurn
                                       : kRightTurn;
           (phase == kLeftTurn ? left_turns : right_turns) += 1;
+          turn_taken = SubtaskName(phase);
           phase_start = k;
         }
-      } else if (phase != kSit && ((k - phase_start) * dt >= o.turn_s ||
-                                   (o.sit_yaw_deg > 0 && (k - phase_start) * dt >= o.turn_min_s &&
-                                    std::abs(AngleDiff(chair_yaw, env->RootRpy().z())) <
-                                        o.sit_yaw_deg * M_PI / 180.0))) {
+      } else if (phase != kSit && decide &&
+                 ((k - phase_start) * dt >= o.turn_s ||
+                  (o.sit_yaw_deg > 0 && (k - phase_start) * dt >= o.turn_min_s &&
+                   SitNow(env->RootRpy().z(), env->humanoid_state().root_ang_vel.z(), sit_yaw,
+                          o.sit_yaw_deg * M_PI / 180.0, o.decision_period * dt)))) {
         phase = kSit;
         ++sits;
         phase_start = k;
+        if (o.plan) {
+          const Eigen::Vector2d rel =
+              Eigen::Rotation2Dd(-chair_yaw) *
+              Eigen::Vector2d(env->humanoid_state().root_pos.head<2>() - sit_start.xy);
+          start_along.push_back(rel.x());
+          start_across.push_back(rel.y());
+          start_yaw_deg.push_back(AngleDiff(env->RootRpy().z(), sit_start.yaw) * 180.0 / M_PI);
+        }
         if (o.sit_starts != nullptr) {
           o.sit_starts->push_back(CaptureState(*env));
           o.sit_starts->back().set_episode(static_cast<uint64_t>(e));
@@ -367,17 +431,39 @@ Json EvaluateChain(const TaskEnvConfig& config,
       }
       if (r.terminated) {
         fell = true;
+        falls_in[phase] += 1;
         break;
       }
     }
     successes += success;
+    per_episode.push_back(
+        {task.spawn_theta() * 180.0 / M_PI, turn_taken, fell ? SubtaskName(phase) : "", success});
     if (o.recorder != nullptr) o.recorder->End(success, fell);
     falls += fell;
     min_dists.push_back(min_dist);
   }
   const double n = o.episodes;
   const auto ci = WilsonInterval95(successes, o.episodes);
+  Json plan = nullptr;
+  if (o.plan) {
+    plan = Json{{"sit_start",
+                 {{"x_m", sit_start.xy.x()},
+                  {"y_m", sit_start.xy.y()},
+                  {"yaw_deg", sit_start.yaw * 180.0 / M_PI}}},
+                {"turn_left_calibration", calibration[0].ToJson()},
+                {"turn_right_calibration", calibration[1].ToJson()},
+                {"handover_pred_err_m_mean", MeanOf(handover_err)},
+                {"sit_start_along_m_mean", MeanOf(start_along)},
+                {"sit_start_along_m_std", StdOf(start_along)},
+                {"sit_start_across_m_mean", MeanOf(start_across)},
+                {"sit_start_across_m_std", StdOf(start_across)},
+                {"sit_start_yaw_deg_mean", MeanOf(start_yaw_deg)},
+                {"sit_start_yaw_deg_std", StdOf(start_yaw_deg)},
+                {"planner", o.planner.ToJson()}};
+  }
   return Json{{"task", "chain"},
+              {"plan", plan},
+              {"decision_period", o.decision_period},
               {"zone", config.env.spawn.zone},
               {"chair", config.env.chair},
               {"episodes", o.episodes},
@@ -388,10 +474,16 @@ Json EvaluateChain(const TaskEnvConfig& config,
               {"min_dist_mean_m", MeanOf(min_dists)},
               {"min_dist_std_m", StdOf(min_dists)},
               {"fall_rate", falls / n},
+              {"falls_by_subtask",
+               {{"walk", falls_in[kWalk]},
+                {"turn_left", falls_in[kLeftTurn]},
+                {"turn_right", falls_in[kRightTurn]},
+                {"sit", falls_in[kSit]}}},
               {"left_turns", left_turns},
               {"right_turns", right_turns},
               {"reached_sit", sits},
               {"time_to_success_s_mean", MeanOf(sit_times)},
+              {"episodes_detail", per_episode},
               {"models",
                {{"walk", paths[kWalk]},
                 {"turn_left", paths[kLeftTurn]},

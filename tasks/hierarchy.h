@@ -17,6 +17,7 @@
 #include "common/proto/model.pb.h"
 #include "envs/humanoid_env.h"
 #include "learner/policy.h"
+#include "tasks/chain_plan.h"
 #include "tasks/clip_task.h"
 #include "tasks/recording.h"
 #include "tasks/task_env.h"
@@ -46,6 +47,9 @@ struct MetaConfig {
   // clipped to 2), since a turn's or a sit's progress is not visible in one posture.
   bool observe_active = false;
   double active_time_scale_s = 3.0;
+  // The scripted planner that teaches this meta (perch meta-clone) and its evaluation row
+  // (perch eval --planner); tasks/meta_expert.h.
+  PlannerConfig planner;
   // Frozen subtask checkpoints by SubtaskId (the fine-tuned ones, as the authors' chain).
   std::array<std::string, 4> subtasks{"models/turn_left_from_walk/policy.bin",
                                       "models/turn_right_from_walk/policy.bin",
@@ -160,6 +164,14 @@ struct ChainOptions {
   double sit_yaw_deg = 0.0;
   double turn_min_s = 0.3;
   std::string side = "short";  // which turn: "short" (the short way round), "left", "right"
+  // The planned hand-over (tasks/chain_plan.h; ours): walk so that the turn ends where the sit's
+  // clip starts, and hand over to the turn when its predicted end is there. The side is chosen
+  // once per episode ("short": by the heading at the spawn).
+  bool plan = false;
+  PlannerConfig planner;  // its rules (sit_yaw_deg and turn_max_s: the chain's own above)
+  // Switches (and walk-target updates) only every this many control steps: 30 is what a meta
+  // controller at 2 Hz can do; 1 is every control step.
+  int decision_period = 1;
   // When set: the full state at every switch to sit (where a sit starts in the chain), for a
   // start-state bank; with stop_at_sit the episode ends there (sampling only).
   std::vector<proto::BankState>* sit_starts = nullptr;

@@ -9,6 +9,7 @@
 
 #include "learner/policy.h"
 #include "tasks/meta_env.h"
+#include "tasks/meta_expert.h"
 #include "tasks/task_eval.h"
 #include "viz/canvas.h"
 
@@ -31,8 +32,9 @@ uint64_t TrialSeed(uint64_t seed, int trial) {
 }
 
 // One trial on `env` with `runner` (both owned by the calling thread).
-TrialResult RunTrial(MetaEnv& env, PolicyRunner& runner, const MetaEvalOptions& o, int trial,
-                     std::vector<PoseFrame>* frames) {
+// With a planner, it decides instead of the runner (which is then null).
+TrialResult RunTrial(MetaEnv& env, PolicyRunner* runner, MetaPlanner* planner,
+                     const MetaEvalOptions& o, int trial, std::vector<PoseFrame>* frames) {
   const uint64_t s = TrialSeed(o.seed, trial);
   env.Seed(2 * s);
   Rng act_rng(2 * s + 1);
@@ -51,8 +53,13 @@ TrialResult RunTrial(MetaEnv& env, PolicyRunner& runner, const MetaEvalOptions& 
     };
   }
   env.Reset(obs.data());
+  if (planner != nullptr) planner->Reset();
   for (int t = 0; t < env.spec().max_episode_steps; ++t) {
-    runner.Act(obs.data(), act_rng, !o.stochastic, nullptr, action.data());
+    if (planner != nullptr) {
+      planner->Act(env, action.data());
+    } else {
+      runner->Act(obs.data(), act_rng, !o.stochastic, nullptr, action.data());
+    }
     const StepResult r = env.Step(action.data(), obs.data());
     if (r.terminated || r.truncated) break;
   }
@@ -78,17 +85,29 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
   if (o.trials < 1) throw ConfigError("eval: --trials must be >= 1");
   TaskEnvConfig config = config_in;
   config.MutableSection<SitChairTaskConfig>().meta.subtask_stochastic = o.stochastic;
-  const PolicyConfig pc = PolicyConfigFromShape(meta.shape(), "meta model");
+  const bool planned = o.planner != nullptr;
+  const PolicyConfig pc =
+      planned ? PolicyConfig::Meta() : PolicyConfigFromShape(meta.shape(), "meta model");
   const MetaConfig& mc = config.Section<SitChairTaskConfig>().meta;
   const int obs_dim = 57 + (mc.observe_active ? kNumSubtasks + 1 : 0);
-  if (pc.kind != PolicyKind::kMeta || pc.obs_dim != obs_dim ||
-      pc.num_choices != static_cast<int>(mc.choices.size())) {
+  if (!planned && (pc.kind != PolicyKind::kMeta || pc.obs_dim != obs_dim ||
+                   pc.num_choices != static_cast<int>(mc.choices.size()))) {
     throw ConfigError("eval: the model is not a meta policy over this config's " +
                       std::to_string(mc.choices.size()) + " subtask choices and " +
                       std::to_string(obs_dim) + " inputs (kind " + meta.shape().kind() + ", " +
                       std::to_string(pc.num_choices) + " classes, " + std::to_string(pc.obs_dim) +
                       " inputs)");
   }
+  auto MakeDecider = [&](std::unique_ptr<PolicyRunner>* runner,
+                         std::unique_ptr<MetaPlanner>* planner) {
+    if (planned) {
+      *planner = std::make_unique<MetaPlanner>(o.planner);
+      return;
+    }
+    *runner = std::make_unique<PolicyRunner>(pc, NormalizerConfig());
+    (*runner)->LoadWeights(meta);
+    (*runner)->set_update_obs_stats(false);
+  };
   const int threads = std::clamp(o.threads, 1, o.trials);
   std::vector<TrialResult> results(o.trials);
   std::atomic<int> next{0}, done{0}, successes{0};
@@ -98,11 +117,11 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
     try {
       MetaEnv env(config);
       env.SetFrozenPolicies(frozen);
-      PolicyRunner runner(pc, NormalizerConfig());
-      runner.LoadWeights(meta);
-      runner.set_update_obs_stats(false);
+      std::unique_ptr<PolicyRunner> runner;
+      std::unique_ptr<MetaPlanner> planner;
+      MakeDecider(&runner, &planner);
       for (int i = next++; i < o.trials; i = next++) {
-        results[i] = RunTrial(env, runner, o, i, nullptr);
+        results[i] = RunTrial(env, runner.get(), planner.get(), o, i, nullptr);
         successes += results[i].success;
         const int d = ++done;
         if (o.progress) {
@@ -182,7 +201,9 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
          {"by_side", sides},
          {"transitions", trans},
          {"sequences", top},
-         {"choices", config.Section<SitChairTaskConfig>().meta.choices}};
+         {"choices", config.Section<SitChairTaskConfig>().meta.choices},
+         {"decider", planned ? "planner" : "meta policy"}};
+  if (planned) j["planner"] = o.planner->ToJson();
 
   // Filmstrip material: the first success and the first failure, replayed (trials are
   // deterministic for their seed).
@@ -192,12 +213,12 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
       if (results[i].success != want_success) continue;
       MetaEnv env(config);
       env.SetFrozenPolicies(frozen);
-      PolicyRunner runner(pc, NormalizerConfig());
-      runner.LoadWeights(meta);
-      runner.set_update_obs_stats(false);
+      std::unique_ptr<PolicyRunner> runner;
+      std::unique_ptr<MetaPlanner> planner;
+      MakeDecider(&runner, &planner);
       out->trial = i;
       out->success = want_success;
-      RunTrial(env, runner, o, i, &out->frames);
+      RunTrial(env, runner.get(), planner.get(), o, i, &out->frames);
       return;
     }
   };

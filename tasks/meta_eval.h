@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,8 @@
 
 namespace perch {
 
+struct MetaPlan;
+
 struct MetaEvalOptions {
   int trials = 100;
   uint64_t seed = 0;
@@ -25,6 +28,8 @@ struct MetaEvalOptions {
   bool stochastic = false;
   int threads = 1;
   std::function<void(int done, int successes)> progress;  // called from the threads, serialised
+  // When set, the scripted planner (tasks/meta_expert.h) decides instead of the meta policy.
+  std::shared_ptr<const MetaPlan> planner;
 };
 
 // The control-step frames of one trial, labelled with the acting subtask.
@@ -45,8 +50,8 @@ Json EvaluateMeta(const TaskEnvConfig& config, const proto::ModelWeights& meta,
                   MetaTrialFrames* first_failure = nullptr);
 
 // Fig. 7: the `transitions` of an EvaluateMeta result as a PNG, one matrix per start side; rows
-// are where a run of one subtask came from (start or a subtask), columns what followed (a subtask or
-// the episode's end); cells shaded by the row's share, labelled with the count.
+// are where a run of one subtask came from (start or a subtask), columns what followed (a subtask
+// or the episode's end); cells shaded by the row's share, labelled with the count.
 void SaveTransitionMatrixPng(const Json& result, const std::string& path);
 
 }  // namespace perch

@@ -1,0 +1,82 @@
+// perch meta-clone: the scripted planner cloned into a meta policy (tasks/meta_clone.h).
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <thread>
+
+#include "actor/experiment.h"
+#include "app/commands.h"
+#include "common/file_util.h"
+#include "common/json_util.h"
+#include "tasks/hierarchy.h"
+#include "tasks/meta_clone.h"
+#include "tasks/meta_expert.h"
+#include "tasks/task_env.h"
+
+namespace perch {
+
+void RegisterMetaCommands(CLI::App& root, CLI::App& /*bench*/) {
+  struct Opts {
+    std::string config, out;
+    std::vector<std::string> sets;
+    CloneOptions clone;
+    bool json = false;
+  };
+  auto o = std::make_shared<Opts>();
+  o->clone.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  CLI::App* cmd = root.add_subcommand(
+      "meta-clone",
+      "Clone the scripted planner (env.sit_chair.meta.planner) into a meta policy: a start for "
+      "PPO (cluster.init_from)");
+  cmd->add_option("--config", o->config, "the sit_chair meta experiment config")->required();
+  cmd->add_option("--set", o->sets, "override one config field (section.field=JSON)");
+  cmd->add_option("--out", o->out, "output ModelWeights file (must not exist)")->required();
+  cmd->add_option("--episodes", o->clone.episodes, "planner episodes per round")
+      ->check(CLI::Range(1, 1000000));
+  cmd->add_option("--rounds", o->clone.rounds, "rounds (> 1: DAgger rounds after the first)")
+      ->check(CLI::Range(1, 100));
+  cmd->add_option("--beta", o->clone.dagger_beta,
+                  "DAgger rounds: the planner acts with this probability per meta step")
+      ->check(CLI::Range(0.0, 1.0));
+  cmd->add_option("--epochs", o->clone.epochs, "passes over the data per round")
+      ->check(CLI::Range(1, 10000));
+  cmd->add_option("--minibatch", o->clone.minibatch, "samples per Adam step")
+      ->check(CLI::Range(1, 1 << 20));
+  cmd->add_option("--lr", o->clone.learning_rate, "Adam learning rate")
+      ->check(CLI::Range(1e-7, 1.0));
+  cmd->add_option("--target-log-std", o->clone.target_log_std,
+                  "the walk target head's log-std after fitting (PPO's exploration)")
+      ->check(CLI::Range(-5.0, 1.0));
+  cmd->add_option("--seed", o->clone.seed, "episodes and shuffling");
+  cmd->add_option("--threads", o->clone.threads, "collection threads")->check(CLI::Range(1, 256));
+  cmd->add_flag("--json", o->json, "print one JSON summary on stdout");
+  cmd->callback([o]() {
+    // Never replace a saved model: a typo in --out must not cost a result.
+    if (std::filesystem::exists(o->out)) throw ConfigError(o->out + ": exists; not overwritten");
+    const ExperimentConfig c = LoadExperimentConfig(o->config, o->sets);
+    const TaskEnvConfig config = TaskEnvConfig::FromJson(c.env, o->config + ": env");
+    if (config.env.task != "sit_chair") {
+      throw ConfigError(o->config + ": env.task is \"" + config.env.task +
+                        "\"; meta-clone needs sit_chair");
+    }
+    const std::vector<FrozenPolicyData> frozen = ExperimentFrozenPolicies(c);
+    const PolicyConfig pc = ResolvePolicyConfig(c, MakeExperimentEnv(c)->spec());
+    std::cerr << "meta-clone: measuring the turns for the planner\n";
+    auto plan = std::make_shared<const MetaPlan>(
+        BuildMetaPlan(config, frozen, config.Section<SitChairTaskConfig>().meta.planner));
+    o->clone.progress = [](const std::string& line) { std::cerr << line << "\n"; };
+    const CloneResult r = CloneMeta(config, frozen, pc, c.ppo.obs_norm, plan, o->clone);
+    WriteFileAtomic(o->out, r.weights.SerializeAsString());
+    Json summary = r.summary;
+    summary["out"] = o->out;
+    summary["config"] = ToJson(c);
+    WriteFileAtomic(o->out + ".json", summary.dump(2) + "\n");
+    if (o->json) {
+      std::cout << summary.dump() << "\n";
+    } else {
+      std::cout << "wrote " << o->out << " (summary " << o->out << ".json)\n";
+    }
+  });
+}
+
+}  // namespace perch

@@ -1,0 +1,208 @@
+#include "tasks/chain_plan.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+
+#include "common/rng.h"
+#include "tasks/hierarchy.h"
+#include "tasks/imitation.h"
+#include "tasks/sit.h"
+#include "tasks/task_env.h"
+
+namespace perch {
+
+namespace {
+
+Eigen::Vector2d Rotate(double yaw, const Eigen::Vector2d& v) {
+  const double c = std::cos(yaw), s = std::sin(yaw);
+  return {c * v.x() - s * v.y(), s * v.x() + c * v.y()};
+}
+
+}  // namespace
+
+PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
+  CheckKnownKeys(j,
+                 {"pass_m", "reach_m", "lookahead_m", "aim_m", "sit_yaw_deg", "turn_max_s",
+                  "calibration_runs", "calibration_seed", "side"},
+                 ctx);
+  PlannerConfig c;
+  GetOptional(j, "pass_m", c.pass_m, ctx);
+  GetOptional(j, "reach_m", c.reach_m, ctx);
+  GetOptional(j, "lookahead_m", c.lookahead_m, ctx);
+  GetOptional(j, "aim_m", c.aim_m, ctx);
+  GetOptional(j, "sit_yaw_deg", c.sit_yaw_deg, ctx);
+  GetOptional(j, "turn_max_s", c.turn_max_s, ctx);
+  GetOptional(j, "calibration_runs", c.calibration_runs, ctx);
+  GetOptional(j, "calibration_seed", c.calibration_seed, ctx);
+  GetOptional(j, "side", c.side, ctx);
+  if (!(c.pass_m > 0 && c.pass_m <= 3)) throw ConfigError(ctx + ".pass_m: must be in (0, 3] m");
+  if (!(c.reach_m >= 0 && c.reach_m <= c.pass_m)) {
+    throw ConfigError(ctx + ".reach_m: must be in [0, pass_m]");
+  }
+  if (!(c.lookahead_m >= 0 && c.lookahead_m <= 5)) {
+    throw ConfigError(ctx + ".lookahead_m: must be in [0, 5] m");
+  }
+  if (!(std::abs(c.aim_m[0]) <= 1 && std::abs(c.aim_m[1]) <= 1)) {
+    throw ConfigError(ctx + ".aim_m: each within +-1 m");
+  }
+  if (!(c.sit_yaw_deg > 0 && c.sit_yaw_deg <= 90)) {
+    throw ConfigError(ctx + ".sit_yaw_deg: must be in (0, 90]");
+  }
+  if (!(c.turn_max_s > 0.3 && c.turn_max_s <= 10)) {
+    throw ConfigError(ctx + ".turn_max_s: must be in (0.3, 10] s");
+  }
+  if (c.calibration_runs < 1 || c.calibration_runs > 1000) {
+    throw ConfigError(ctx + ".calibration_runs: must be in [1, 1000]");
+  }
+  if (c.side != "short" && c.side != "left" && c.side != "right") {
+    throw ConfigError(ctx + ".side: expected short, left or right, got \"" + c.side + "\"");
+  }
+  return c;
+}
+
+Json PlannerConfig::ToJson() const {
+  return Json{{"pass_m", pass_m},
+              {"reach_m", reach_m},
+              {"lookahead_m", lookahead_m},
+              {"aim_m", aim_m},
+              {"sit_yaw_deg", sit_yaw_deg},
+              {"turn_max_s", turn_max_s},
+              {"calibration_runs", calibration_runs},
+              {"calibration_seed", calibration_seed},
+              {"side", side}};
+}
+
+Eigen::Vector2d TurnCalibration::DisplacementAt(double rotation) const {
+  for (size_t k = 0; k < rotation_rad.size(); ++k) {
+    if (rotation_rad[k] >= rotation) return disp[k];
+  }
+  return disp.empty() ? Eigen::Vector2d::Zero() : disp.back();
+}
+
+Json TurnCalibration::ToJson() const {
+  Json path = Json::array();
+  // Every 10th step is enough to read the shape of the turn.
+  for (size_t k = 0; k < disp.size(); k += 10) {
+    path.push_back({{"t_steps", k},
+                    {"rotation_deg", rotation_rad[k] * 180.0 / M_PI},
+                    {"forward_m", disp[k].x()},
+                    {"left_m", disp[k].y()}});
+  }
+  return Json{{"runs", runs}, {"fell", fell}, {"path", path}};
+}
+
+TurnCalibration CalibrateTurn(HumanoidChairEnv& env, SubtaskPolicies& policies, int id, int runs,
+                              uint64_t seed, double max_s) {
+  const int steps = static_cast<int>(std::ceil(max_s / env.spec().control_dt));
+  std::vector<float> obs(env.spec().obs_dim), action(21);
+  std::vector<double> rot_sum(steps, 0.0);
+  std::vector<Eigen::Vector2d> disp_sum(steps, Eigen::Vector2d::Zero());
+  TurnCalibration c;
+  for (int r = 0; r < runs; ++r) {
+    env.Seed(seed * 7919ULL + static_cast<uint64_t>(r));
+    Rng rng(seed * 7919ULL + static_cast<uint64_t>(r) + 1);
+    env.Reset(obs.data());
+    policies.Begin(id, env);
+    const Eigen::Vector2d xy0 = env.humanoid_state().root_pos.head<2>();
+    const double yaw0 = env.RootRpy().z();
+    double yaw = yaw0, unwrapped = 0.0;
+    std::vector<double> rot(steps);
+    std::vector<Eigen::Vector2d> d(steps);
+    bool fell = false;
+    for (int k = 0; k < steps; ++k) {
+      policies.Act(id, env, rng, true, action.data());
+      if (env.Step(action.data(), obs.data()).terminated) {
+        fell = true;
+        break;
+      }
+      const double y = env.RootRpy().z();
+      unwrapped += AngleDiff(y, yaw);
+      yaw = y;
+      rot[k] = std::abs(unwrapped);
+      d[k] = Rotate(-yaw0, env.humanoid_state().root_pos.head<2>() - xy0);
+    }
+    if (fell) {
+      ++c.fell;
+      continue;
+    }
+    ++c.runs;
+    for (int k = 0; k < steps; ++k) {
+      rot_sum[k] += rot[k];
+      disp_sum[k] += d[k];
+    }
+  }
+  if (c.runs == 0) {
+    throw std::runtime_error(std::string("chain plan: every calibration run of ") +
+                             SubtaskName(id) + " fell");
+  }
+  for (int k = 0; k < steps; ++k) {
+    c.rotation_rad.push_back(rot_sum[k] / c.runs);
+    c.disp.push_back(disp_sum[k] / c.runs);
+  }
+  return c;
+}
+
+PlanarPose SitClipStart(const Json& saved, const EnvConfig& chain_env, const std::string& ctx) {
+  if (!saved.is_object() || !saved.contains("env")) {
+    throw ConfigError(ctx +
+                      ": the sit model has no saved config (a checkpoint is needed to know "
+                      "where its clip starts)");
+  }
+  TaskEnvConfig c = TaskEnvConfig::FromJson(saved["env"], ctx + ": saved config env");
+  if (c.env.task != "sit") {
+    throw ConfigError(ctx + ": the sit model was trained on task \"" + c.env.task + "\"");
+  }
+  c.env.chair = chain_env.chair;
+  c.env.chair_placement = chain_env.chair_placement;
+  c.env.chair_random = chain_env.chair_random;
+  SitTaskConfig& s = c.MutableSection<SitTaskConfig>();
+  s.start.banks.clear();
+  s.reference_state_init = false;
+  std::unique_ptr<HumanoidChairEnv> env = MakeTaskHumanoidEnv(c);
+  std::vector<float> obs(env->spec().obs_dim);
+  env->Seed(0);
+  env->Reset(obs.data());
+  PlanarPose p;
+  p.xy = env->humanoid_state().root_pos.head<2>();
+  p.yaw = env->RootRpy().z();
+  return p;
+}
+
+bool SitNow(double yaw, double yaw_rate, double sit_yaw, double tol, double period_s) {
+  const double now = std::abs(AngleDiff(sit_yaw, yaw));
+  if (now < tol) return true;
+  if (period_s <= 0.05) return false;  // deciding every control step: the tolerance is enough
+  const double next = std::abs(AngleDiff(sit_yaw, yaw + yaw_rate * period_s));
+  return now < 3.0 * tol && now <= next;
+}
+
+bool HandOverNow(const PlanView& v, const Eigen::Vector2d& root_vel, double period_s,
+                 const Eigen::Vector2d& sit_xy, const PlanRule& rule) {
+  if (v.error_m <= rule.reach_m) return true;
+  const double next_err = (v.predicted_end + root_vel * period_s - sit_xy).norm();
+  return v.error_m < rule.pass_m && v.error_m <= next_err;
+}
+
+PlanView PlanStep(const PlanarPose& root, const PlanarPose& sit, const TurnCalibration& turn,
+                  bool left, const PlanRule& rule) {
+  PlanView v;
+  double rot = AngleDiff(sit.yaw, root.yaw);  // > 0: counter-clockwise (left)
+  if (!left) rot = -rot;
+  if (rot < 0) rot += 2.0 * M_PI;
+  v.rotation_rad = rot;
+  const Eigen::Vector2d disp = turn.DisplacementAt(std::max(0.0, rot - rule.tolerance_rad));
+  v.predicted_end = root.xy + Rotate(root.yaw, disp);
+  const Eigen::Vector2d d = sit.xy - v.predicted_end;
+  v.error_m = d.norm();
+  // Walk where the root must be for the turn to end on the sit start, never nearer than the
+  // look-ahead (the walker circles a target it has reached).
+  Eigen::Vector2d dir = d.norm() > 1e-6 ? Eigen::Vector2d(d / d.norm())
+                                        : Eigen::Vector2d(std::cos(root.yaw), std::sin(root.yaw));
+  v.walk_target = d.norm() >= rule.lookahead_m ? Eigen::Vector2d(root.xy + d)
+                                               : Eigen::Vector2d(root.xy + rule.lookahead_m * dir);
+  return v;
+}
+
+}  // namespace perch

@@ -1,0 +1,98 @@
+// The planned hand-over for the scripted chain (ours; issue 15): where each subtask must start so
+// that the next one starts where it was trained to.
+//  * The sit starts where its own clip starts on this chair (SitClipStart): root xy and heading
+//    of the placed clip's first frame, the pose its transition fine-tuning placed turn end poses.
+//  * A turn's mean motion is measured once (CalibrateTurn): from the walker's states it is run
+//    and its root displacement in its start frame recorded against the rotation so far.
+//  * While walking, the chain predicts where the turn would end if it began now (the current
+//    root plus the calibrated displacement for the rotation still needed, rotated by the current
+//    heading), steers the walker so that this prediction moves onto the sit start, and hands over
+//    when it is there (PlanStep).
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <string>
+#include <vector>
+
+#include "common/json_util.h"
+#include "envs/env_config.h"
+#include "envs/humanoid_env.h"
+
+namespace perch {
+
+class SubtaskPolicies;
+
+// A subtask's start pose in the world: root xy [m] and heading [rad].
+struct PlanarPose {
+  Eigen::Vector2d xy = Eigen::Vector2d::Zero();
+  double yaw = 0.0;
+};
+
+// The mean path of a turn run from walking states, per control step k since it began.
+struct TurnCalibration {
+  std::vector<double> rotation_rad;  // [k] |yaw change| so far, mean over the surviving runs
+  std::vector<Eigen::Vector2d>
+      disp;  // [k] root displacement (forward, left) in the start frame [m]
+  int runs = 0, fell = 0;
+  // The displacement when the turn has rotated by `rotation_rad` (first step that reaches it;
+  // the last one when the turn never does).
+  Eigen::Vector2d DisplacementAt(double rotation_rad) const;
+  Json ToJson() const;
+};
+
+// Runs turn `id` of `policies` for `runs` episodes of `env` (each from the env's own reset, a
+// walking state) for up to max_s seconds, deterministic actions.
+TurnCalibration CalibrateTurn(HumanoidChairEnv& env, SubtaskPolicies& policies, int id, int runs,
+                              uint64_t seed, double max_s);
+
+// Where the sit subtask's clip starts on chain_env's chair: its saved experiment config (the one
+// stored with the sit checkpoint), with no start banks and no reference state initialisation.
+PlanarPose SitClipStart(const Json& sit_saved_config, const EnvConfig& chain_env,
+                        const std::string& ctx);
+
+// The planner's rules (env.sit_chair.meta.planner; the chain's --chain-plan-* flags).
+struct PlannerConfig {
+  double pass_m = 0.5;       // hand over only when the predicted turn end is this close [m]
+  double reach_m = 0.08;     // ... at once when this close [m]
+  double lookahead_m = 1.5;  // walk targets are never nearer than this [m]
+  std::array<double, 2> aim_m{0.1, 0.0};  // turn end aim from the sit clip's start (chair frame)
+  double sit_yaw_deg = 15.0;              // turn -> sit tolerance on the heading
+  double turn_max_s = 3.2;                // turn -> sit at the latest
+  int calibration_runs = 20;
+  uint64_t calibration_seed = 17;
+  std::string side = "short";  // "short" (by the heading at the first decision), "left", "right"
+
+  static PlannerConfig FromJson(const Json& j, const std::string& ctx);
+  Json ToJson() const;
+};
+
+struct PlanRule {
+  double reach_m = 0.08;     // hand over when the predicted turn end is this close to the sit start
+  double pass_m = 0.35;      // ... or when it has come this close and starts moving away again
+  double lookahead_m = 0.8;  // the walk target is never nearer than this [m]
+  double tolerance_rad = 0.0;  // the turn is cut this much before its full rotation (sit rule)
+};
+
+struct PlanView {
+  Eigen::Vector2d walk_target = Eigen::Vector2d::Zero();    // world [m]
+  Eigen::Vector2d predicted_end = Eigen::Vector2d::Zero();  // where the turn would end [m]
+  double error_m = 0.0;                                     // |predicted_end - sit start| [m]
+  double rotation_rad = 0.0;                                // the rotation the turn needs (>= 0)
+};
+
+// The plan for the current root pose with turn calibration `turn` turning left (left = true) or
+// right towards sit start `sit`.
+PlanView PlanStep(const PlanarPose& root, const PlanarPose& sit, const TurnCalibration& turn,
+                  bool left, const PlanRule& rule);
+
+// Walk -> turn now: the predicted end is within reach_m, or within pass_m and the next decision
+// (period_s later, the root moving at root_vel with its heading held) would find it further.
+bool HandOverNow(const PlanView& v, const Eigen::Vector2d& root_vel, double period_s,
+                 const Eigen::Vector2d& sit_xy, const PlanRule& rule);
+
+// Turn -> sit now: the heading is within `tol` of the sit's, or (deciding only every period_s)
+// within 3 tol and the next decision would find it further away at the present yaw rate.
+bool SitNow(double yaw, double yaw_rate, double sit_yaw, double tol, double period_s);
+
+}  // namespace perch

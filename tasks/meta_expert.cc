@@ -1,0 +1,125 @@
+#include "tasks/meta_expert.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+
+#include "common/proto/model.pb.h"
+#include "tasks/hierarchy.h"
+#include "tasks/imitation.h"
+#include "tasks/meta_env.h"
+
+namespace perch {
+
+Json MetaPlan::ToJson() const {
+  return Json{{"config", config.ToJson()},
+              {"sit_start",
+               {{"x_m", sit_start.xy.x()},
+                {"y_m", sit_start.xy.y()},
+                {"yaw_deg", sit_start.yaw * 180.0 / M_PI}}},
+              {"turn_left_calibration", turns[0].ToJson()},
+              {"turn_right_calibration", turns[1].ToJson()}};
+}
+
+MetaPlan BuildMetaPlan(const TaskEnvConfig& config, const std::vector<FrozenPolicyData>& frozen,
+                       const PlannerConfig& planner) {
+  if (config.env.task != "sit_chair") {
+    throw ConfigError("planner: needs the sit_chair env task, got \"" + config.env.task + "\"");
+  }
+  std::array<proto::ModelWeights, kNumSubtasks> models;
+  std::array<std::string, kNumSubtasks> names;
+  std::array<Json, kNumSubtasks> saved;
+  std::array<bool, kNumSubtasks> have{};
+  for (const FrozenPolicyData& f : frozen) {
+    const int id = SubtaskIdOf(f.name);
+    if (id < 0 || id == kWalk) continue;
+    const std::string ctx = "planner: frozen " + f.name + " policy " + f.source;
+    if (!models[id].ParseFromString(f.model)) throw ConfigError(ctx + ": model does not parse");
+    names[id] = f.source.empty() ? f.name : f.source;
+    if (!f.saved_config.empty()) saved[id] = Json::parse(f.saved_config);
+    have[id] = true;
+  }
+  for (int id : {kLeftTurn, kRightTurn, kSit}) {
+    if (!have[id]) {
+      throw ConfigError(std::string("planner: needs the ") + SubtaskName(id) +
+                        " subtask among sit_chair.meta.choices");
+    }
+  }
+  SubtaskPolicies policies(models, names, saved, {true, true, true, false});
+  std::unique_ptr<HumanoidChairEnv> env = MakeTaskHumanoidEnv(config);
+  auto& task = const_cast<SitChairTask&>(dynamic_cast<const SitChairTask&>(env->task()));
+  MetaPlan plan;
+  plan.config = planner;
+  for (int side = 0; side < 2; ++side) {
+    const int id = side == 0 ? kLeftTurn : kRightTurn;
+    task.set_active(id);
+    plan.turns[side] = CalibrateTurn(*env, policies, id, planner.calibration_runs,
+                                     planner.calibration_seed, planner.turn_max_s);
+  }
+  plan.sit_start = SitClipStart(saved[kSit], config.env, "planner: sit policy " + names[kSit]);
+  const double chair_yaw = config.env.chair_placement.yaw;
+  plan.sit_start.xy +=
+      Eigen::Rotation2Dd(chair_yaw) * Eigen::Vector2d(planner.aim_m[0], planner.aim_m[1]);
+  return plan;
+}
+
+void MetaPlanner::Reset() {
+  side_ = -1;
+  last_active_ = -1;
+  active_since_step_ = 0;
+}
+
+void MetaPlanner::Act(const MetaEnv& env, float* action) {
+  const MetaPlan& p = *plan_;
+  const PlannerConfig& c = p.config;
+  const HumanoidChairEnv& h = env.humanoid();
+  const double dt = h.spec().control_dt;
+  const double period_s = env.meta().period * dt;
+  const PlanarPose root{h.humanoid_state().root_pos.head<2>(), h.RootRpy().z()};
+  if (side_ < 0) {
+    side_ = c.side == "left"    ? 0
+            : c.side == "right" ? 1
+                                : (AngleDiff(p.sit_start.yaw, root.yaw) >= 0 ? 0 : 1);
+  }
+  PlanRule rule;
+  rule.reach_m = c.reach_m;
+  rule.pass_m = c.pass_m;
+  rule.lookahead_m = c.lookahead_m;
+  rule.tolerance_rad = c.sit_yaw_deg * M_PI / 180.0;
+  int want = env.active();
+  if (want != last_active_) {
+    // It began at the start of the last meta step (or at the reset).
+    active_since_step_ = std::max(0, h.episode_step() - (last_active_ < 0 ? 0 : env.meta().period));
+    last_active_ = want;
+  }
+  // Turns and sit ignore the target; keep it ahead so a later walk starts sensibly.
+  Eigen::Vector2d target =
+      root.xy + c.lookahead_m * Eigen::Vector2d(std::cos(root.yaw), std::sin(root.yaw));
+  if (want == kWalk) {
+    const PlanView v = PlanStep(root, p.sit_start, p.turns[side_], side_ == 0, rule);
+    target = v.walk_target;
+    if (HandOverNow(v, h.humanoid_state().root_lin_vel.head<2>(), period_s, p.sit_start.xy, rule)) {
+      want = side_ == 0 ? kLeftTurn : kRightTurn;
+    }
+  } else if (want == kLeftTurn || want == kRightTurn) {
+    const double t = (h.episode_step() - active_since_step_) * dt;
+    if (t >= c.turn_max_s || (t >= 0.3 && SitNow(root.yaw, h.humanoid_state().root_ang_vel.z(),
+                                                 p.sit_start.yaw, rule.tolerance_rad, period_s))) {
+      want = kSit;
+    }
+  }
+  const std::vector<std::string>& choices = env.meta().choices;
+  auto index_of = [&](int id) {
+    const auto it = std::find(choices.begin(), choices.end(), SubtaskName(id));
+    return it == choices.end() ? -1 : static_cast<int>(it - choices.begin());
+  };
+  int cls = index_of(want);
+  if (cls < 0) cls = index_of(env.active());
+  if (cls < 0) cls = env.meta().target_choice();
+  const Eigen::Vector2d d = target - root.xy;
+  action[0] = static_cast<float>(cls);
+  action[1] = static_cast<float>(AngleDiff(std::atan2(d.y(), d.x()), root.yaw));
+  action[2] = static_cast<float>(d.norm());
+}
+
+}  // namespace perch

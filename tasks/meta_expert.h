@@ -1,0 +1,53 @@
+// A scripted meta controller (ours; issue 15): the planned hand-over of tasks/chain_plan.h decided
+// at the meta controller's own rate, through MetaEnv's hybrid action. It is the teacher a meta
+// policy is cloned from (tasks/meta_clone.h) and a row of the evaluation ("planner").
+//
+// Each meta step: while walking, steer the walker so that the turn would end where the sit's clip
+// starts, and choose the turn at the decision whose predicted turn end is nearest to it; while
+// turning, choose sit at the decision nearest to the sit's heading; then keep sitting.
+#pragma once
+
+#include <array>
+#include <memory>
+#include <vector>
+
+#include "common/env.h"
+#include "common/json_util.h"
+#include "common/rng.h"
+#include "tasks/chain_plan.h"
+#include "tasks/task_env.h"
+
+namespace perch {
+
+class MetaEnv;
+
+// What the planner knows, measured once for a config and its frozen subtasks (immutable; shared
+// by the threads of an evaluation).
+struct MetaPlan {
+  PlannerConfig config;
+  PlanarPose sit_start;                  // the aim point (sit clip start + aim_m)
+  std::array<TurnCalibration, 2> turns;  // left, right
+  Json ToJson() const;
+};
+
+MetaPlan BuildMetaPlan(const TaskEnvConfig& config, const std::vector<FrozenPolicyData>& frozen,
+                       const PlannerConfig& planner);
+
+// One per env (per thread): call Reset after each MetaEnv::Reset, then Act before each Step.
+class MetaPlanner {
+ public:
+  explicit MetaPlanner(std::shared_ptr<const MetaPlan> plan) : plan_(std::move(plan)) {}
+  void Reset();
+  // action[3] = [class index in env.meta().choices, theta rad, dist m].
+  void Act(const MetaEnv& env, float* action);
+
+ private:
+  std::shared_ptr<const MetaPlan> plan_;
+  int side_ = -1;  // 0 left, 1 right; chosen at the first decision
+  // The subtask seen acting at the last decision and the control step it began (whoever chose
+  // it: a cloned policy may drive while the planner labels, tasks/meta_clone.h).
+  int last_active_ = -1;
+  int active_since_step_ = 0;
+};
+
+}  // namespace perch
