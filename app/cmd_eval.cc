@@ -282,6 +282,13 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   cmd->add_option("--chain-plan-aim-m", chain->options.planner.aim_m,
                   "chain plan: aim the turn's end this far from the sit clip's start (along the "
                   "chair's facing, across to its left) [m]");
+  cmd->add_option("--chain-plan-approach-deg", chain->options.planner.approach_deg,
+                  "chain plan: approach the turn along a line at this angle to the sit's facing "
+                  "(90: past the chair's front; < 0: off) [deg]")
+      ->check(CLI::Range(-1.0, 90.0));
+  cmd->add_option("--chain-plan-regress", chain->options.planner.regress_start_state,
+                  "chain plan: predict the turn's path from its start state (true) or use the "
+                  "mean path (false)");
   cmd->add_option("--chain-plan-calibration-runs", chain->options.planner.calibration_runs,
                   "chain plan: turn runs measured to learn each turn's path")
       ->check(CLI::Range(1, 1000));

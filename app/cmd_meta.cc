@@ -8,6 +8,8 @@
 #include "app/commands.h"
 #include "common/file_util.h"
 #include "common/json_util.h"
+#include "learner/service/checkpoint.h"
+#include "learner/service/wire.h"
 #include "tasks/hierarchy.h"
 #include "tasks/meta_clone.h"
 #include "tasks/meta_expert.h"
@@ -30,7 +32,10 @@ void RegisterMetaCommands(CLI::App& root, CLI::App& /*bench*/) {
       "PPO (cluster.init_from)");
   cmd->add_option("--config", o->config, "the sit_chair meta experiment config")->required();
   cmd->add_option("--set", o->sets, "override one config field (section.field=JSON)");
-  cmd->add_option("--out", o->out, "output ModelWeights file (must not exist)")->required();
+  cmd->add_option("--out", o->out,
+                  "output checkpoint (must not exist): the clone, its config and the frozen "
+                  "subtasks, as a run's checkpoint (perch eval --model, cluster.init_from)")
+      ->required();
   cmd->add_option("--episodes", o->clone.episodes, "planner episodes per round")
       ->check(CLI::Range(1, 1000000));
   cmd->add_option("--rounds", o->clone.rounds, "rounds (> 1: DAgger rounds after the first)")
@@ -66,7 +71,21 @@ void RegisterMetaCommands(CLI::App& root, CLI::App& /*bench*/) {
         BuildMetaPlan(config, frozen, config.Section<SitChairTaskConfig>().meta.planner));
     o->clone.progress = [](const std::string& line) { std::cerr << line << "\n"; };
     const CloneResult r = CloneMeta(config, frozen, pc, c.ppo.obs_norm, plan, o->clone);
-    WriteFileAtomic(o->out, r.weights.SerializeAsString());
+    // A checkpoint like a run's at update 0, so that eval finds the config and the subtasks in
+    // it and a PPO run starts from it.
+    proto::Checkpoint ck;
+    ck.set_wire_version(proto::WIRE_VERSION_CURRENT);
+    proto::TaskPolicy* tp = ck.mutable_weights()->add_policies();
+    tp->set_task(proto::TASK_META);
+    *tp->mutable_model() = r.weights;
+    for (const FrozenPolicyData& f : frozen) {
+      *ck.mutable_weights()->add_policies() = FrozenPolicyToProto(f);
+    }
+    *ck.mutable_trainer()->mutable_model() = r.weights;
+    ck.set_resolved_config_json(ToJson(c).dump());
+    ck.set_compat_key(CompatKey(c, pc));
+    ck.set_seed(c.seed);
+    WriteFileAtomic(o->out, FrameCheckpoint(ck));
     Json summary = r.summary;
     summary["out"] = o->out;
     summary["config"] = ToJson(c);

@@ -23,10 +23,11 @@ Eigen::Vector2d Rotate(double yaw, const Eigen::Vector2d& v) {
 
 PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(j,
-                 {"pass_m", "reach_m", "lookahead_m", "aim_m", "sit_yaw_deg", "turn_max_s",
-                  "calibration_runs", "calibration_seed", "side"},
-                 ctx);
+  CheckKnownKeys(
+      j,
+      {"pass_m", "reach_m", "lookahead_m", "aim_m", "sit_yaw_deg", "turn_max_s", "calibration_runs",
+       "calibration_seed", "side", "approach_deg", "regress_start_state", "clearance_m"},
+      ctx);
   PlannerConfig c;
   GetOptional(j, "pass_m", c.pass_m, ctx);
   GetOptional(j, "reach_m", c.reach_m, ctx);
@@ -37,6 +38,13 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "calibration_runs", c.calibration_runs, ctx);
   GetOptional(j, "calibration_seed", c.calibration_seed, ctx);
   GetOptional(j, "side", c.side, ctx);
+  GetOptional(j, "approach_deg", c.approach_deg, ctx);
+  GetOptional(j, "regress_start_state", c.regress_start_state, ctx);
+  GetOptional(j, "clearance_m", c.clearance_m, ctx);
+  if (!(c.clearance_m >= 0 && c.clearance_m <= 3)) {
+    throw ConfigError(ctx + ".clearance_m: must be in [0, 3] m");
+  }
+  if (!(c.approach_deg <= 90)) throw ConfigError(ctx + ".approach_deg: must be <= 90");
   if (!(c.pass_m > 0 && c.pass_m <= 3)) throw ConfigError(ctx + ".pass_m: must be in (0, 3] m");
   if (!(c.reach_m >= 0 && c.reach_m <= c.pass_m)) {
     throw ConfigError(ctx + ".reach_m: must be in [0, pass_m]");
@@ -71,7 +79,10 @@ Json PlannerConfig::ToJson() const {
               {"turn_max_s", turn_max_s},
               {"calibration_runs", calibration_runs},
               {"calibration_seed", calibration_seed},
-              {"side", side}};
+              {"side", side},
+              {"approach_deg", approach_deg},
+              {"regress_start_state", regress_start_state},
+              {"clearance_m", clearance_m}};
 }
 
 Eigen::Vector2d TurnCalibration::DisplacementAt(double rotation) const {
@@ -81,6 +92,57 @@ Eigen::Vector2d TurnCalibration::DisplacementAt(double rotation) const {
   return disp.empty() ? Eigen::Vector2d::Zero() : disp.back();
 }
 
+Eigen::Vector2d TurnCalibration::PredictDisplacement(const std::vector<double>& features,
+                                                     double rotation) const {
+  const int n = static_cast<int>(run_features.size());
+  const int f = static_cast<int>(features.size());
+  if (n < 4 * (f + 1) || f == 0) return DisplacementAt(rotation);
+  // Standardised features, an intercept, ridge lambda 1 (in units of runs).
+  Eigen::VectorXd mean = Eigen::VectorXd::Zero(f), sd = Eigen::VectorXd::Zero(f);
+  for (const auto& r : run_features) mean += Eigen::Map<const Eigen::VectorXd>(r.data(), f);
+  mean /= n;
+  for (const auto& r : run_features) {
+    sd += (Eigen::Map<const Eigen::VectorXd>(r.data(), f) - mean).cwiseAbs2();
+  }
+  sd = (sd / n).cwiseSqrt().cwiseMax(1e-6);
+  Eigen::MatrixXd x(n, f + 1), y(n, 2);
+  for (int i = 0; i < n; ++i) {
+    x(i, 0) = 1.0;
+    x.row(i).tail(f) =
+        ((Eigen::Map<const Eigen::VectorXd>(run_features[i].data(), f) - mean).array() / sd.array())
+            .matrix()
+            .transpose();
+    const std::vector<double>& rot = run_rotation[i];
+    size_t k = 0;
+    while (k + 1 < rot.size() && rot[k] < rotation) ++k;
+    y.row(i) = run_disp[i][k].transpose();
+  }
+  Eigen::MatrixXd a = x.transpose() * x;
+  a.diagonal().tail(f).array() += 1.0;
+  const Eigen::MatrixXd w = a.ldlt().solve(x.transpose() * y);
+  Eigen::VectorXd q(f + 1);
+  q(0) = 1.0;
+  q.tail(f) = ((Eigen::Map<const Eigen::VectorXd>(features.data(), f) - mean).array() / sd.array())
+                  .matrix();
+  return (q.transpose() * w).transpose();
+}
+
+std::vector<double> TurnStartFeatures(const HumanoidChairEnv& env) {
+  const HumanoidState& s = env.humanoid_state();
+  const double yaw = env.RootRpy().z();
+  const Eigen::Vector2d v = Rotate(-yaw, s.root_lin_vel.head<2>());
+  const int rh = env.model().FindJoint("right_hip_y"), lh = env.model().FindJoint("left_hip_y");
+  const double hip = rh >= 0 && lh >= 0 ? s.q[rh] - s.q[lh] : 0.0;
+  const double hip_rate = rh >= 0 && lh >= 0 ? s.qd[rh] - s.qd[lh] : 0.0;
+  return {v.x(),
+          v.y(),
+          s.root_ang_vel.z(),
+          env.contacts().foot_floor[0] ? 1.0 : 0.0,
+          env.contacts().foot_floor[1] ? 1.0 : 0.0,
+          hip,
+          hip_rate};
+}
+
 Json TurnCalibration::ToJson() const {
   Json path = Json::array();
   // Every 10th step is enough to read the shape of the turn.
@@ -88,7 +150,9 @@ Json TurnCalibration::ToJson() const {
     path.push_back({{"t_steps", k},
                     {"rotation_deg", rotation_rad[k] * 180.0 / M_PI},
                     {"forward_m", disp[k].x()},
-                    {"left_m", disp[k].y()}});
+                    {"left_m", disp[k].y()},
+                    {"forward_std_m", disp_std[k].x()},
+                    {"left_std_m", disp_std[k].y()}});
   }
   return Json{{"runs", runs}, {"fell", fell}, {"path", path}};
 }
@@ -99,11 +163,13 @@ TurnCalibration CalibrateTurn(HumanoidChairEnv& env, SubtaskPolicies& policies, 
   std::vector<float> obs(env.spec().obs_dim), action(21);
   std::vector<double> rot_sum(steps, 0.0);
   std::vector<Eigen::Vector2d> disp_sum(steps, Eigen::Vector2d::Zero());
+  std::vector<Eigen::Vector2d> disp_sq(steps, Eigen::Vector2d::Zero());
   TurnCalibration c;
   for (int r = 0; r < runs; ++r) {
     env.Seed(seed * 7919ULL + static_cast<uint64_t>(r));
     Rng rng(seed * 7919ULL + static_cast<uint64_t>(r) + 1);
     env.Reset(obs.data());
+    const std::vector<double> features = TurnStartFeatures(env);
     policies.Begin(id, env);
     const Eigen::Vector2d xy0 = env.humanoid_state().root_pos.head<2>();
     const double yaw0 = env.RootRpy().z();
@@ -128,9 +194,13 @@ TurnCalibration CalibrateTurn(HumanoidChairEnv& env, SubtaskPolicies& policies, 
       continue;
     }
     ++c.runs;
+    c.run_features.push_back(features);
+    c.run_rotation.push_back(rot);
+    c.run_disp.push_back(d);
     for (int k = 0; k < steps; ++k) {
       rot_sum[k] += rot[k];
       disp_sum[k] += d[k];
+      disp_sq[k] += d[k].cwiseProduct(d[k]);
     }
   }
   if (c.runs == 0) {
@@ -140,6 +210,8 @@ TurnCalibration CalibrateTurn(HumanoidChairEnv& env, SubtaskPolicies& policies, 
   for (int k = 0; k < steps; ++k) {
     c.rotation_rad.push_back(rot_sum[k] / c.runs);
     c.disp.push_back(disp_sum[k] / c.runs);
+    const Eigen::Vector2d var = disp_sq[k] / c.runs - c.disp.back().cwiseProduct(c.disp.back());
+    c.disp_std.push_back(var.cwiseMax(0.0).cwiseSqrt());
   }
   return c;
 }
@@ -170,6 +242,23 @@ PlanarPose SitClipStart(const Json& saved, const EnvConfig& chain_env, const std
   return p;
 }
 
+Eigen::Vector2d AvoidChair(const Eigen::Vector2d& root, const Eigen::Vector2d& target,
+                           const Eigen::Vector2d& chair_xy, double clearance_m) {
+  const Eigen::Vector2d seg = target - root;
+  const double len2 = seg.squaredNorm();
+  if (clearance_m <= 0 || len2 < 1e-12) return target;
+  const double t = std::clamp((chair_xy - root).dot(seg) / len2, 0.0, 1.0);
+  if ((root + t * seg - chair_xy).norm() >= clearance_m) return target;
+  const Eigen::Vector2d from = root - chair_xy;
+  if (from.norm() < clearance_m) return target;  // already beside it: go on
+  const Eigen::Vector2d u = from / from.norm();
+  const Eigen::Vector2d side(-u.y(), u.x());
+  // The point beside the chair on the target's side, a little toward the root so that the
+  // walker passes it rather than circles it.
+  const double s = (target - chair_xy).dot(side) >= 0 ? 1.0 : -1.0;
+  return chair_xy + clearance_m * (s * side + 0.3 * u).normalized();
+}
+
 bool SitNow(double yaw, double yaw_rate, double sit_yaw, double tol, double period_s) {
   const double now = std::abs(AngleDiff(sit_yaw, yaw));
   if (now < tol) return true;
@@ -186,22 +275,38 @@ bool HandOverNow(const PlanView& v, const Eigen::Vector2d& root_vel, double peri
 }
 
 PlanView PlanStep(const PlanarPose& root, const PlanarPose& sit, const TurnCalibration& turn,
-                  bool left, const PlanRule& rule) {
+                  bool left, const PlanRule& rule, const std::vector<double>* features) {
   PlanView v;
   double rot = AngleDiff(sit.yaw, root.yaw);  // > 0: counter-clockwise (left)
   if (!left) rot = -rot;
   if (rot < 0) rot += 2.0 * M_PI;
   v.rotation_rad = rot;
-  const Eigen::Vector2d disp = turn.DisplacementAt(std::max(0.0, rot - rule.tolerance_rad));
+  const double cut = std::max(0.0, rot - rule.tolerance_rad);
+  const Eigen::Vector2d disp =
+      features != nullptr ? turn.PredictDisplacement(*features, cut) : turn.DisplacementAt(cut);
   v.predicted_end = root.xy + Rotate(root.yaw, disp);
   const Eigen::Vector2d d = sit.xy - v.predicted_end;
   v.error_m = d.norm();
+  v.start_point = root.xy + d;
   // Walk where the root must be for the turn to end on the sit start, never nearer than the
   // look-ahead (the walker circles a target it has reached).
   Eigen::Vector2d dir = d.norm() > 1e-6 ? Eigen::Vector2d(d / d.norm())
                                         : Eigen::Vector2d(std::cos(root.yaw), std::sin(root.yaw));
   v.walk_target = d.norm() >= rule.lookahead_m ? Eigen::Vector2d(root.xy + d)
                                                : Eigen::Vector2d(root.xy + rule.lookahead_m * dir);
+  if (rule.approach_rad >= 0) {
+    // Follow the line into the turn's start for that approach heading: a point on it ahead of
+    // the root's projection (pure pursuit), while the root is still behind the start point.
+    const double rot_a = M_PI - rule.approach_rad;
+    const double heading = sit.yaw - (left ? rot_a : -rot_a);
+    const Eigen::Vector2d u(std::cos(heading), std::sin(heading));
+    const Eigen::Vector2d start =
+        sit.xy - Rotate(heading, turn.DisplacementAt(std::max(0.0, rot_a - rule.tolerance_rad)));
+    const double along = (root.xy - start).dot(u);
+    if (along < 0.0) {
+      v.walk_target = start + u * (along + std::max(rule.lookahead_m, 0.5));
+    }
+  }
   return v;
 }
 

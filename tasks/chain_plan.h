@@ -34,12 +34,28 @@ struct TurnCalibration {
   std::vector<double> rotation_rad;  // [k] |yaw change| so far, mean over the surviving runs
   std::vector<Eigen::Vector2d>
       disp;  // [k] root displacement (forward, left) in the start frame [m]
+  std::vector<Eigen::Vector2d> disp_std;  // [k] its spread over the runs [m]
   int runs = 0, fell = 0;
+  // Per surviving run: its start features (TurnStartFeatures) and its own path.
+  std::vector<std::vector<double>> run_features;
+  std::vector<std::vector<double>> run_rotation;       // [run][k] [rad]
+  std::vector<std::vector<Eigen::Vector2d>> run_disp;  // [run][k] [m]
   // The displacement when the turn has rotated by `rotation_rad` (first step that reaches it;
   // the last one when the turn never does).
   Eigen::Vector2d DisplacementAt(double rotation_rad) const;
+  // The same for a turn that starts from a state with these features: a ridge regression of the
+  // runs' own displacements at that rotation on their start features (gait phase, speed). The
+  // mean path when there are too few runs. Measured: it does not narrow the hand-over's spread
+  // (docs/meta.md), so the planner's default is the mean path.
+  Eigen::Vector2d PredictDisplacement(const std::vector<double>& features,
+                                      double rotation_rad) const;
   Json ToJson() const;
 };
+
+// What a turn's path depends on, read at its start (its start frame): forward and lateral speed
+// [m/s], yaw rate [rad/s], foot contacts (right, left), hip flexion difference right - left [rad]
+// and its rate [rad/s].
+std::vector<double> TurnStartFeatures(const HumanoidChairEnv& env);
 
 // Runs turn `id` of `policies` for `runs` episodes of `env` (each from the env's own reset, a
 // walking state) for up to max_s seconds, deterministic actions.
@@ -62,6 +78,17 @@ struct PlannerConfig {
   int calibration_runs = 20;
   uint64_t calibration_seed = 17;
   std::string side = "short";  // "short" (by the heading at the first decision), "left", "right"
+  // Approach the turn's start along a line that meets the sit's facing at this angle [deg]
+  // (90: walking past the front of the chair; 0: straight at it), so that the turn's forward
+  // travel does not carry the humanoid into the seat; < 0: no line, the turn begins from
+  // whatever heading the walker has.
+  double approach_deg = -1.0;
+  // Predict the turn's path from the state it would start in (TurnCalibration::
+  // PredictDisplacement) rather than its mean path.
+  bool regress_start_state = false;
+  // Walk around the chair: a walk target behind it (seen from the root) is replaced by a point
+  // this far from the seat centre, beside it (zones 2 and 3 start behind the chair) [m]; 0: off.
+  double clearance_m = 0.6;
 
   static PlannerConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;
@@ -72,10 +99,12 @@ struct PlanRule {
   double pass_m = 0.35;      // ... or when it has come this close and starts moving away again
   double lookahead_m = 0.8;  // the walk target is never nearer than this [m]
   double tolerance_rad = 0.0;  // the turn is cut this much before its full rotation (sit rule)
+  double approach_rad = -1.0;  // PlannerConfig::approach_deg; < 0: off
 };
 
 struct PlanView {
   Eigen::Vector2d walk_target = Eigen::Vector2d::Zero();    // world [m]
+  Eigen::Vector2d start_point = Eigen::Vector2d::Zero();    // where the turn should begin [m]
   Eigen::Vector2d predicted_end = Eigen::Vector2d::Zero();  // where the turn would end [m]
   double error_m = 0.0;                                     // |predicted_end - sit start| [m]
   double rotation_rad = 0.0;                                // the rotation the turn needs (>= 0)
@@ -83,8 +112,15 @@ struct PlanView {
 
 // The plan for the current root pose with turn calibration `turn` turning left (left = true) or
 // right towards sit start `sit`.
+// features: TurnStartFeatures of the current state (the prediction then uses the regression),
+// or null (the mean path).
 PlanView PlanStep(const PlanarPose& root, const PlanarPose& sit, const TurnCalibration& turn,
-                  bool left, const PlanRule& rule);
+                  bool left, const PlanRule& rule, const std::vector<double>* features = nullptr);
+
+// `target` unless the straight walk from `root` to it passes within clearance_m of `chair_xy`:
+// then the tangent-side point clearance_m from the chair (the side nearer the target).
+Eigen::Vector2d AvoidChair(const Eigen::Vector2d& root, const Eigen::Vector2d& target,
+                           const Eigen::Vector2d& chair_xy, double clearance_m);
 
 // Walk -> turn now: the predicted end is within reach_m, or within pass_m and the next decision
 // (period_s later, the root moving at root_vel with its heading held) would find it further.

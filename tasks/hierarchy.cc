@@ -317,6 +317,7 @@ Json EvaluateChain(const TaskEnvConfig& config,
     rule.pass_m = o.planner.pass_m;
     rule.lookahead_m = o.planner.lookahead_m;
     rule.tolerance_rad = o.sit_yaw_deg * M_PI / 180.0;
+    rule.approach_rad = o.planner.approach_deg < 0 ? -1.0 : o.planner.approach_deg * M_PI / 180.0;
   }
   const double sit_yaw = o.plan ? sit_start.yaw : chair_yaw;
   int successes = 0, falls = 0, left_turns = 0, right_turns = 0, sits = 0;
@@ -353,8 +354,9 @@ Json EvaluateChain(const TaskEnvConfig& config,
       if (phase == kWalk && o.plan) {
         if (decide) {
           const PlanarPose root{env->humanoid_state().root_pos.head<2>(), env->RootRpy().z()};
-          const PlanView v =
-              PlanStep(root, sit_start, calibration[plan_left ? 0 : 1], plan_left, rule);
+          const std::vector<double> features = TurnStartFeatures(*env);
+          const PlanView v = PlanStep(root, sit_start, calibration[plan_left ? 0 : 1], plan_left,
+                                      rule, o.planner.regress_start_state ? &features : nullptr);
           env->SetWalkTarget(v.walk_target);
           const bool now = HandOverNow(v, env->humanoid_state().root_lin_vel.head<2>(),
                                        o.decision_period * dt, sit_start.xy, rule);

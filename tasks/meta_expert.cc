@@ -86,6 +86,7 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
   rule.pass_m = c.pass_m;
   rule.lookahead_m = c.lookahead_m;
   rule.tolerance_rad = c.sit_yaw_deg * M_PI / 180.0;
+  rule.approach_rad = c.approach_deg < 0 ? -1.0 : c.approach_deg * M_PI / 180.0;
   int want = env.active();
   if (want != last_active_) {
     // It began at the start of the last meta step (or at the reset).
@@ -96,8 +97,13 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
   Eigen::Vector2d target =
       root.xy + c.lookahead_m * Eigen::Vector2d(std::cos(root.yaw), std::sin(root.yaw));
   if (want == kWalk) {
-    const PlanView v = PlanStep(root, p.sit_start, p.turns[side_], side_ == 0, rule);
-    target = v.walk_target;
+    const std::vector<double> features = TurnStartFeatures(h);
+    const PlanView v = PlanStep(root, p.sit_start, p.turns[side_], side_ == 0, rule,
+                                c.regress_start_state ? &features : nullptr);
+    // Around the chair when the way to the turn's start passes it (zones 2 and 3).
+    const Eigen::Vector2d around =
+        AvoidChair(root.xy, v.start_point, h.SeatTargetWorld().head<2>(), c.clearance_m);
+    target = around == v.start_point ? v.walk_target : around;
     if (HandOverNow(v, h.humanoid_state().root_lin_vel.head<2>(), period_s, p.sit_start.xy, rule)) {
       want = side_ == 0 ? kLeftTurn : kRightTurn;
     }

@@ -142,9 +142,8 @@ proto::Recording ReadRecording(const std::string& path) {
   proto::Recording rec;
   if (!rec.ParseFromString(payload)) throw ConfigError(path + ": recording payload does not parse");
   if (rec.format_version() != kRecordingFormat) {
-    throw ConfigError(path + ": recording message version " +
-                      std::to_string(rec.format_version()) + " (expected " +
-                      std::to_string(kRecordingFormat) + ")");
+    throw ConfigError(path + ": recording message version " + std::to_string(rec.format_version()) +
+                      " (expected " + std::to_string(kRecordingFormat) + ")");
   }
   const int nb = rec.bodies_size();
   for (const proto::RecEpisode& ep : rec.episodes()) {
@@ -159,8 +158,8 @@ proto::Recording ReadRecording(const std::string& path) {
   return rec;
 }
 
-ReferenceMotion RecordedMotion(const proto::Recording& rec, int episode,
-                               const HumanoidModel& model, const std::string& ctx) {
+ReferenceMotion RecordedMotion(const proto::Recording& rec, int episode, const HumanoidModel& model,
+                               const std::string& ctx) {
   const proto::RecEpisode* ep = nullptr;
   for (const proto::RecEpisode& e : rec.episodes()) {
     if (e.index() == episode) ep = &e;
@@ -189,8 +188,8 @@ ReferenceMotion RecordedMotion(const proto::Recording& rec, int episode,
   std::vector<MotionPose> frames;
   for (const proto::RecFrame& f : ep->frames()) {
     MotionPose p;
-    p.root_pos = Eigen::Vector3d(f.body_pos(3 * root), f.body_pos(3 * root + 1),
-                                 f.body_pos(3 * root + 2));
+    p.root_pos =
+        Eigen::Vector3d(f.body_pos(3 * root), f.body_pos(3 * root + 1), f.body_pos(3 * root + 2));
     p.root_rot = Eigen::Quaterniond(f.body_quat(4 * root), f.body_quat(4 * root + 1),
                                     f.body_quat(4 * root + 2), f.body_quat(4 * root + 3))
                      .normalized();

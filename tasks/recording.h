@@ -61,7 +61,7 @@ proto::Recording ReadRecording(const std::string& path);
 // The recorded episode with index `episode` as a humanoid motion (root = the root body's recorded
 // pose, joint angles as recorded) at the control rate; ConfigError naming ctx when the episode is
 // missing or the recording's humanoid is not `model`'s.
-ReferenceMotion RecordedMotion(const proto::Recording& rec, int episode,
-                               const HumanoidModel& model, const std::string& ctx);
+ReferenceMotion RecordedMotion(const proto::Recording& rec, int episode, const HumanoidModel& model,
+                               const std::string& ctx);
 
 }  // namespace perch

@@ -103,8 +103,11 @@ class WalkTask : public Task {
   const WalkTerms& last_terms() const { return m_.terms; }
   Json LastRewardTerms() const override {
     const WalkTerms& t = m_.terms;
-    return Json{{"pose", t.pose}, {"joint_vel", t.joint_vel}, {"similarity", t.similarity},
-                {"goal", t.goal}, {"total", t.total}};
+    return Json{{"pose", t.pose},
+                {"joint_vel", t.joint_vel},
+                {"similarity", t.similarity},
+                {"goal", t.goal},
+                {"total", t.total}};
   }
   int targets_reached() const { return m_.targets_reached; }  // this episode
   // The current target's distance from the root when it was drawn [m] (target stage).

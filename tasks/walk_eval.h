@@ -6,17 +6,16 @@
 #include <string>
 #include <vector>
 
-#include "tasks/recording.h"
 #include "common/json_util.h"
 #include "common/proto/model.pb.h"
 #include "learner/policy.h"
 #include "tasks/foot_sliding.h"
 #include "tasks/model_source.h"
+#include "tasks/recording.h"
 #include "tasks/task_env.h"
 #include "viz/filmstrip.h"
 
 namespace perch {
-
 
 struct WalkEvalOptions {
   int episodes = 10;

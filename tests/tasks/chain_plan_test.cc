@@ -1,0 +1,228 @@
+#include "tasks/chain_plan.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "tasks/hierarchy.h"
+#include "tasks/meta_clone.h"
+#include "tasks/meta_env.h"
+#include "tasks/meta_eval.h"
+#include "tasks/meta_expert.h"
+
+namespace perch {
+namespace {
+
+Eigen::Vector2d Dir(double yaw) { return {std::cos(yaw), std::sin(yaw)}; }
+
+// A turn that rotates steadily to 180 deg over 100 steps while moving 0.8 m forward and then
+// 0.4 m to its left.
+TurnCalibration SyntheticLeftTurn() {
+  TurnCalibration c;
+  for (int k = 0; k <= 100; ++k) {
+    const double f = k / 100.0;
+    c.rotation_rad.push_back(M_PI * f);
+    c.disp.push_back({0.8 * std::min(1.0, 2 * f), 0.4 * std::max(0.0, 2 * f - 1)});
+    c.disp_std.push_back({0.0, 0.0});
+  }
+  c.runs = 1;
+  return c;
+}
+
+TEST(ChainPlan, DisplacementIsReadWhereTheTurnHasRotatedThatFar) {
+  const TurnCalibration c = SyntheticLeftTurn();
+  EXPECT_NEAR(c.DisplacementAt(0.0).x(), 0.0, 1e-12);
+  EXPECT_NEAR(c.DisplacementAt(M_PI / 2).x(), 0.8, 1e-9);  // step 50
+  EXPECT_NEAR(c.DisplacementAt(M_PI / 2).y(), 0.0, 1e-9);
+  // A rotation the turn never reaches: where it ended.
+  EXPECT_NEAR(c.DisplacementAt(4.0).y(), 0.4, 1e-9);
+}
+
+TEST(ChainPlan, AtTheRightStartThePredictedEndIsTheSitStartAndItHandsOver) {
+  const TurnCalibration turn = SyntheticLeftTurn();
+  PlanarPose sit;
+  sit.xy = {0.35, 0.0};
+  sit.yaw = 0.0;
+  PlanRule rule;
+  rule.tolerance_rad = 0.0;
+  // Walking toward the chair (heading pi): a left turn of 180 deg ends 0.8 m further along and
+  // 0.4 m to the left (-y); start where that lands on the sit start.
+  const double yaw = M_PI;
+  const Eigen::Vector2d disp(0.8, 0.4);
+  const Eigen::Vector2d rotated(-disp.x(), -disp.y());  // R(pi) disp
+  PlanarPose root{sit.xy - rotated, yaw};
+  PlanView v = PlanStep(root, sit, turn, true, rule);
+  EXPECT_NEAR(v.rotation_rad, M_PI, 1e-9);
+  EXPECT_NEAR(v.error_m, 0.0, 1e-9);
+  EXPECT_TRUE(HandOverNow(v, Dir(yaw) * 1.2, 0.5, sit.xy, rule));
+  // The walk target is never nearer than the look-ahead and points the same way.
+  EXPECT_NEAR((v.walk_target - root.xy).norm(), rule.lookahead_m, 1e-9);
+  // 0.6 m short of that point, walking on toward it: not yet, and the target is that point.
+  PlanarPose early{root.xy - 0.6 * Dir(yaw), yaw};
+  rule.lookahead_m = 0.3;
+  v = PlanStep(early, sit, turn, true, rule);
+  EXPECT_NEAR(v.error_m, 0.6, 1e-9);
+  EXPECT_NEAR((v.walk_target - root.xy).norm(), 0.0, 1e-9);
+  EXPECT_FALSE(HandOverNow(v, Dir(yaw) * 1.2, 0.2, sit.xy, rule));
+  // ... but if the next decision is 1.5 s away it would overshoot by more: hand over now.
+  rule.pass_m = 1.0;
+  EXPECT_FALSE(HandOverNow(v, Dir(yaw) * 1.2, 0.2, sit.xy, rule));
+  EXPECT_TRUE(HandOverNow(v, Dir(yaw) * 1.2, 1.5, sit.xy, rule));
+}
+
+TEST(ChainPlan, TheRotationNeededDependsOnTheSide) {
+  const TurnCalibration turn = SyntheticLeftTurn();
+  const PlanarPose sit{{0.0, 0.0}, 0.0};
+  const PlanarPose walking_down{{0.0, 2.0}, -M_PI / 2};  // heading -y
+  PlanRule rule;
+  EXPECT_NEAR(PlanStep(walking_down, sit, turn, true, rule).rotation_rad, M_PI / 2, 1e-9);
+  EXPECT_NEAR(PlanStep(walking_down, sit, turn, false, rule).rotation_rad, 1.5 * M_PI, 1e-9);
+  // The tolerance cuts the turn short: the displacement is read that much earlier.
+  rule.tolerance_rad = M_PI / 4;
+  const PlanView cut = PlanStep(walking_down, sit, turn, true, rule);
+  const Eigen::Vector2d d = turn.DisplacementAt(M_PI / 4);
+  EXPECT_NEAR((cut.predicted_end - walking_down.xy).norm(), d.norm(), 1e-9);
+}
+
+TEST(ChainPlan, AnApproachLineLeadsOntoItsStartFromBehind) {
+  const TurnCalibration turn = SyntheticLeftTurn();
+  const PlanarPose sit{{0.35, 0.0}, 0.0};
+  PlanRule rule;
+  rule.approach_rad = M_PI / 2;  // walk past the chair's front (heading -y), then turn 90 deg
+  // Far up the +y side and off the line: the target lies on the line x = start.x, ahead.
+  const PlanarPose root{{1.5, 3.0}, -M_PI / 2};
+  const PlanView v = PlanStep(root, sit, turn, true, rule);
+  const Eigen::Vector2d start = sit.xy - Eigen::Vector2d(turn.DisplacementAt(M_PI / 2).y(),
+                                                         -turn.DisplacementAt(M_PI / 2).x());
+  EXPECT_NEAR(v.walk_target.x(), start.x(), 1e-9);
+  EXPECT_LT(v.walk_target.y(), root.xy.y());
+  EXPECT_GT(v.walk_target.y(), start.y());
+  // Without the line the walker heads straight for where its present heading says to turn.
+  rule.approach_rad = -1.0;
+  EXPECT_NEAR(PlanStep(root, sit, turn, true, rule).walk_target.x(), v.start_point.x(), 1e-9);
+}
+
+TEST(ChainPlan, WalksAroundTheChairOnlyWhenTheWayPassesIt) {
+  const Eigen::Vector2d chair(0.0, 0.0);
+  // Clear of it: unchanged.
+  const Eigen::Vector2d far_target(2.0, 2.0);
+  EXPECT_EQ(AvoidChair({2.0, -2.0}, far_target, chair, 0.6), far_target);
+  // From behind the chair to its front: a point beside it, 0.6 m out, on the target's side.
+  const Eigen::Vector2d w = AvoidChair({-1.5, 0.0}, {1.0, 0.3}, chair, 0.6);
+  EXPECT_NEAR(w.norm(), 0.6, 1e-9);
+  EXPECT_GT(w.y(), 0.4);
+  EXPECT_LT(w.x(), 0.0);  // still on the root's side: passed, not circled
+  EXPECT_LT(AvoidChair({-1.5, 0.0}, {1.0, -0.3}, chair, 0.6).y(), -0.4);
+  EXPECT_EQ(AvoidChair({-1.5, 0.0}, {1.0, 0.3}, chair, 0.0), Eigen::Vector2d(1.0, 0.3));  // off
+}
+
+TEST(ChainPlan, SitNowAtTheToleranceOrAtTheClosestDecision) {
+  const double tol = 15 * M_PI / 180;
+  EXPECT_TRUE(SitNow(0.1, 2.0, 0.0, tol, 0.0165));
+  EXPECT_FALSE(SitNow(0.5, 0.0, 0.0, tol, 0.0165));  // every step: only the tolerance
+  // 0.5 s between decisions, turning at 2 rad/s: 0.5 rad short now, 0.5 rad past at the next.
+  EXPECT_TRUE(SitNow(-0.4, 2.0, 0.0, tol, 0.5));
+  EXPECT_FALSE(SitNow(-0.7, 2.0, 0.0, tol, 0.5));  // the next decision lands nearer (0.3)
+}
+
+TEST(ChainPlan, PlannerConfigIsStrictAndNamesTheField) {
+  EXPECT_NO_THROW(PlannerConfig::FromJson(Json::object(), "p"));
+  const PlannerConfig c = PlannerConfig::FromJson(PlannerConfig().ToJson(), "p");
+  EXPECT_EQ(c.ToJson(), PlannerConfig().ToJson());
+  for (const Json& bad : {Json{{"pass", 0.3}}, Json{{"side", "up"}}, Json{{"reach_m", 2.0}},
+                          Json{{"aim_m", {3.0, 0.0}}}, Json{{"pass_m", "x"}}}) {
+    try {
+      PlannerConfig::FromJson(bad, "sit_chair.meta.planner");
+      ADD_FAILURE() << "accepted " << bad.dump();
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find("sit_chair.meta.planner"), std::string::npos)
+          << e.what();
+    }
+  }
+}
+
+// ---- with the delivered subtasks ---------------------------------------------------------------
+
+TaskEnvConfig PlannedMeta(int runs) {
+  Json env{{"task", "sit_chair"},
+           {"spawn", {{"zone", 1}}},
+           {"sit_chair",
+            {{"support_reward", 5.0},
+             {"meta",
+              {{"observe_active", true},
+               {"subtask_stochastic", false},
+               {"planner", {{"calibration_runs", runs}}}}}}}};
+  return TaskEnvConfig::FromJson(env, "t");
+}
+
+TEST(ChainPlan, PlanOfTheDeliveredSubtasks) {
+  const TaskEnvConfig c = PlannedMeta(4);
+  const std::vector<FrozenPolicyData> frozen = LoadFrozenPolicies(c);
+  const MetaPlan plan = BuildMetaPlan(c, frozen, c.Section<SitChairTaskConfig>().meta.planner);
+  // The sit's clip starts in front of the authors' seat (it faces +x), facing away from it;
+  // the planner aims 0.1 m further out.
+  EXPECT_GT(plan.sit_start.xy.x(), 0.3);
+  EXPECT_LT(plan.sit_start.xy.x(), 0.7);
+  EXPECT_LT(std::abs(plan.sit_start.xy.y()), 0.05);
+  EXPECT_LT(std::abs(plan.sit_start.yaw), 10 * M_PI / 180);
+  for (int side = 0; side < 2; ++side) {
+    const TurnCalibration& t = plan.turns[side];
+    EXPECT_GE(t.runs, 1);
+    EXPECT_GT(t.rotation_rad.back(), 150 * M_PI / 180) << side;
+    // Left turns drift left, right turns right.
+    EXPECT_GT((side == 0 ? 1 : -1) * t.disp.back().y(), 0.1) << side;
+    EXPECT_GT(t.disp.back().x(), 0.3) << side;
+  }
+  // A meta without the turns cannot be planned for.
+  TaskEnvConfig walk_only = c;
+  walk_only.MutableSection<SitChairTaskConfig>().meta.choices = {"walk"};
+  EXPECT_THROW(BuildMetaPlan(walk_only, LoadFrozenPolicies(walk_only), PlannerConfig()),
+               ConfigError);
+
+  // Driving the meta env at 2 Hz it runs walk -> turn -> sit and sits in some trials (the
+  // trials are deterministic for their seed).
+  MetaEvalOptions o;
+  o.trials = 40;
+  o.seed = 2;
+  o.threads = 2;
+  o.planner = std::make_shared<const MetaPlan>(plan);
+  const Json j = EvaluateMeta(c, proto::ModelWeights(), frozen, o);
+  EXPECT_GT(j["success_rate"].get<double>(), 0.0);
+  EXPECT_EQ(j["decider"], "planner");
+  for (const Json& s : j["sequences"]) {
+    const std::string seq = s["sequence"];
+    EXPECT_EQ(seq.rfind("walk", 0), 0u) << seq;
+    EXPECT_EQ(seq.find("sit>"), std::string::npos) << seq;  // sit is never left
+  }
+}
+
+TEST(MetaClone, ClonesThePlannersChoicesAndDaggerAddsTheClonesStates) {
+  const TaskEnvConfig c = PlannedMeta(2);
+  const std::vector<FrozenPolicyData> frozen = LoadFrozenPolicies(c);
+  auto plan = std::make_shared<const MetaPlan>(
+      BuildMetaPlan(c, frozen, c.Section<SitChairTaskConfig>().meta.planner));
+  PolicyConfig pc = PolicyConfig::Meta(62);
+  CloneOptions o;
+  o.episodes = 12;
+  o.rounds = 2;
+  o.epochs = 60;
+  o.threads = 2;
+  o.seed = 5;
+  const CloneResult r = CloneMeta(c, frozen, pc, NormalizerConfig(), plan, o);
+  const Json& rounds = r.summary["rounds"];
+  ASSERT_EQ(rounds.size(), 2u);
+  EXPECT_GT(rounds[1]["samples_total"].get<int>(), rounds[0]["samples_total"].get<int>());
+  EXPECT_EQ(rounds[0]["samples_total"], rounds[0]["meta_steps"]);
+  EXPECT_GT(rounds[0]["switch_accuracy"].get<double>(), 0.9);
+  // The weights load as the meta policy of this config, with the target's spread reset.
+  PolicyRunner runner(pc, NormalizerConfig());
+  runner.LoadWeights(r.weights);
+  EXPECT_FLOAT_EQ(runner.model().params()[runner.model().log_std_offset()], o.target_log_std);
+  EXPECT_GT(r.weights.obs_stats().count(), rounds[1]["samples_total"].get<int>() - 1);
+  // Same seed, same clone.
+  EXPECT_EQ(CloneMeta(c, frozen, pc, NormalizerConfig(), plan, o).weights.SerializeAsString(),
+            r.weights.SerializeAsString());
+}
+
+}  // namespace
+}  // namespace perch
