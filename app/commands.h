@@ -17,6 +17,6 @@ void RegisterProfileCommands(CLI::App& root, CLI::App& bench);  // app/cmd_profi
 void RegisterViewCommands(CLI::App& root, CLI::App& bench);     // app/cmd_view.cc
 void RegisterInfoCommands(CLI::App& root, CLI::App& bench);     // app/cmd_info.cc
 void RegisterMetaCommands(CLI::App& root, CLI::App& bench);     // app/cmd_meta.cc
-void RegisterFuzzCommand(CLI::App& root);                          // app/cmd_fuzz.cc
+void RegisterFuzzCommand(CLI::App& root);                       // app/cmd_fuzz.cc
 
 }  // namespace perch
