@@ -23,11 +23,11 @@ Eigen::Vector2d Rotate(double yaw, const Eigen::Vector2d& v) {
 
 PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(
-      j,
-      {"pass_m", "reach_m", "lookahead_m", "aim_m", "sit_yaw_deg", "turn_max_s", "calibration_runs",
-       "calibration_seed", "side", "approach_deg", "regress_start_state", "clearance_m"},
-      ctx);
+  CheckKnownKeys(j,
+                 {"pass_m", "reach_m", "lookahead_m", "aim_m", "sit_yaw_deg", "turn_max_s",
+                  "turn_min_s", "calibration_runs", "calibration_seed", "side", "approach_deg",
+                  "regress_start_state", "clearance_m"},
+                 ctx);
   PlannerConfig c;
   GetOptional(j, "pass_m", c.pass_m, ctx);
   GetOptional(j, "reach_m", c.reach_m, ctx);
@@ -35,6 +35,7 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "aim_m", c.aim_m, ctx);
   GetOptional(j, "sit_yaw_deg", c.sit_yaw_deg, ctx);
   GetOptional(j, "turn_max_s", c.turn_max_s, ctx);
+  GetOptional(j, "turn_min_s", c.turn_min_s, ctx);
   GetOptional(j, "calibration_runs", c.calibration_runs, ctx);
   GetOptional(j, "calibration_seed", c.calibration_seed, ctx);
   GetOptional(j, "side", c.side, ctx);
@@ -61,6 +62,9 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!(c.turn_max_s > 0.3 && c.turn_max_s <= 10)) {
     throw ConfigError(ctx + ".turn_max_s: must be in (0.3, 10] s");
   }
+  if (!(c.turn_min_s >= 0 && c.turn_min_s < c.turn_max_s)) {
+    throw ConfigError(ctx + ".turn_min_s: must be in [0, turn_max_s)");
+  }
   if (c.calibration_runs < 1 || c.calibration_runs > 1000) {
     throw ConfigError(ctx + ".calibration_runs: must be in [1, 1000]");
   }
@@ -77,6 +81,7 @@ Json PlannerConfig::ToJson() const {
               {"aim_m", aim_m},
               {"sit_yaw_deg", sit_yaw_deg},
               {"turn_max_s", turn_max_s},
+              {"turn_min_s", turn_min_s},
               {"calibration_runs", calibration_runs},
               {"calibration_seed", calibration_seed},
               {"side", side},
@@ -257,6 +262,43 @@ Eigen::Vector2d AvoidChair(const Eigen::Vector2d& root, const Eigen::Vector2d& t
   // walker passes it rather than circles it.
   const double s = (target - chair_xy).dot(side) >= 0 ? 1.0 : -1.0;
   return chair_xy + clearance_m * (s * side + 0.3 * u).normalized();
+}
+
+PlanRule MakePlanRule(const PlannerConfig& c, double sit_yaw_deg) {
+  PlanRule rule;
+  rule.reach_m = c.reach_m;
+  rule.pass_m = c.pass_m;
+  rule.lookahead_m = c.lookahead_m;
+  rule.tolerance_rad = sit_yaw_deg * M_PI / 180.0;
+  rule.approach_rad = c.approach_deg < 0 ? -1.0 : c.approach_deg * M_PI / 180.0;
+  return rule;
+}
+
+Json MetaPlan::ToJson() const {
+  return Json{{"config", config.ToJson()},
+              {"sit_start",
+               {{"x_m", sit_start.xy.x()},
+                {"y_m", sit_start.xy.y()},
+                {"yaw_deg", sit_start.yaw * 180.0 / M_PI}}},
+              {"turn_left_calibration", turns[0].ToJson()},
+              {"turn_right_calibration", turns[1].ToJson()}};
+}
+
+MetaPlan MeasurePlan(HumanoidChairEnv& env, SubtaskPolicies& policies, const Json& sit_saved,
+                     const std::string& sit_name, const PlannerConfig& planner) {
+  auto& task = const_cast<SitChairTask&>(dynamic_cast<const SitChairTask&>(env.task()));
+  MetaPlan plan;
+  plan.config = planner;
+  for (int side = 0; side < 2; ++side) {
+    const int id = side == 0 ? kLeftTurn : kRightTurn;
+    task.set_active(id);
+    plan.turns[side] = CalibrateTurn(env, policies, id, planner.calibration_runs,
+                                     planner.calibration_seed, planner.turn_max_s);
+  }
+  plan.sit_start = SitClipStart(sit_saved, env.config(), "planner: sit policy " + sit_name);
+  plan.sit_start.xy += Eigen::Rotation2Dd(env.config().chair_placement.yaw) *
+                       Eigen::Vector2d(planner.aim_m[0], planner.aim_m[1]);
+  return plan;
 }
 
 bool SitNow(double yaw, double yaw_rate, double sit_yaw, double tol, double period_s) {

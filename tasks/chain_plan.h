@@ -75,6 +75,7 @@ struct PlannerConfig {
   std::array<double, 2> aim_m{0.1, 0.0};  // turn end aim from the sit clip's start (chair frame)
   double sit_yaw_deg = 15.0;              // turn -> sit tolerance on the heading
   double turn_max_s = 3.2;                // turn -> sit at the latest
+  double turn_min_s = 0.3;                // ... and not before [s]
   int calibration_runs = 20;
   uint64_t calibration_seed = 17;
   std::string side = "short";  // "short" (by the heading at the first decision), "left", "right"
@@ -101,6 +102,23 @@ struct PlanRule {
   double tolerance_rad = 0.0;  // the turn is cut this much before its full rotation (sit rule)
   double approach_rad = -1.0;  // PlannerConfig::approach_deg; < 0: off
 };
+
+// The rule of a planner config, with the turn -> sit tolerance `sit_yaw_deg` [deg].
+PlanRule MakePlanRule(const PlannerConfig& c, double sit_yaw_deg);
+
+// What the planner knows, measured once for a chair and its frozen subtasks (immutable; shared
+// by the threads of an evaluation): where to aim the turn's end, and each turn's path.
+struct MetaPlan {
+  PlannerConfig config;
+  PlanarPose sit_start;                  // the aim point (sit clip start + aim_m)
+  std::array<TurnCalibration, 2> turns;  // left, right
+  Json ToJson() const;
+};
+
+// Measures a plan on `env` (a sit_chair env; its resets are the calibration runs' starts) with
+// the turns of `policies` (run for up to planner.turn_max_s) and the sit model's saved config.
+MetaPlan MeasurePlan(HumanoidChairEnv& env, SubtaskPolicies& policies, const Json& sit_saved,
+                     const std::string& sit_name, const PlannerConfig& planner);
 
 struct PlanView {
   Eigen::Vector2d walk_target = Eigen::Vector2d::Zero();    // world [m]

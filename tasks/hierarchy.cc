@@ -299,26 +299,17 @@ Json EvaluateChain(const TaskEnvConfig& config,
   std::vector<float> obs(env->spec().obs_dim), action(21);
   if (o.decision_period < 1) throw ConfigError("chain: decision period must be >= 1");
   // The planned hand-over: where the sit starts, how each turn moves (tasks/chain_plan.h).
-  PlanarPose sit_start;
-  std::array<TurnCalibration, 2> calibration;
+  MetaPlan plan;
   PlanRule rule;
   if (o.plan) {
-    sit_start =
-        SitClipStart(saved_configs[kSit], config.env, "chain plan: sit policy " + paths[kSit]);
-    sit_start.xy +=
-        Eigen::Rotation2Dd(chair_yaw) * Eigen::Vector2d(o.planner.aim_m[0], o.planner.aim_m[1]);
-    for (int side = 0; side < 2; ++side) {
-      const int id = side == 0 ? kLeftTurn : kRightTurn;
-      task.set_active(id);
-      calibration[side] = CalibrateTurn(*env, policies, id, o.planner.calibration_runs,
-                                        o.planner.calibration_seed, o.turn_s);
-    }
-    rule.reach_m = o.planner.reach_m;
-    rule.pass_m = o.planner.pass_m;
-    rule.lookahead_m = o.planner.lookahead_m;
-    rule.tolerance_rad = o.sit_yaw_deg * M_PI / 180.0;
-    rule.approach_rad = o.planner.approach_deg < 0 ? -1.0 : o.planner.approach_deg * M_PI / 180.0;
+    // The chain's own turn limit and sit tolerance rule its turns.
+    PlannerConfig pc = o.planner;
+    pc.turn_max_s = o.turn_s;
+    plan = MeasurePlan(*env, policies, saved_configs[kSit], paths[kSit], pc);
+    rule = MakePlanRule(o.planner, o.sit_yaw_deg);
   }
+  const PlanarPose& sit_start = plan.sit_start;
+  const std::array<TurnCalibration, 2>& calibration = plan.turns;
   const double sit_yaw = o.plan ? sit_start.yaw : chair_yaw;
   int successes = 0, falls = 0, left_turns = 0, right_turns = 0, sits = 0;
   std::array<int, kNumSubtasks> falls_in{};  // by the subtask acting when the episode ended
@@ -354,7 +345,8 @@ Json EvaluateChain(const TaskEnvConfig& config,
       if (phase == kWalk && o.plan) {
         if (decide) {
           const PlanarPose root{env->humanoid_state().root_pos.head<2>(), env->RootRpy().z()};
-          const std::vector<double> features = TurnStartFeatures(*env);
+          const std::vector<double> features =
+              o.planner.regress_start_state ? TurnStartFeatures(*env) : std::vector<double>();
           const PlanView v = PlanStep(root, sit_start, calibration[plan_left ? 0 : 1], plan_left,
                                       rule, o.planner.regress_start_state ? &features : nullptr);
           env->SetWalkTarget(v.walk_target);
@@ -446,25 +438,25 @@ Json EvaluateChain(const TaskEnvConfig& config,
   }
   const double n = o.episodes;
   const auto ci = WilsonInterval95(successes, o.episodes);
-  Json plan = nullptr;
+  Json plan_json = nullptr;
   if (o.plan) {
-    plan = Json{{"sit_start",
-                 {{"x_m", sit_start.xy.x()},
-                  {"y_m", sit_start.xy.y()},
-                  {"yaw_deg", sit_start.yaw * 180.0 / M_PI}}},
-                {"turn_left_calibration", calibration[0].ToJson()},
-                {"turn_right_calibration", calibration[1].ToJson()},
-                {"handover_pred_err_m_mean", MeanOf(handover_err)},
-                {"sit_start_along_m_mean", MeanOf(start_along)},
-                {"sit_start_along_m_std", StdOf(start_along)},
-                {"sit_start_across_m_mean", MeanOf(start_across)},
-                {"sit_start_across_m_std", StdOf(start_across)},
-                {"sit_start_yaw_deg_mean", MeanOf(start_yaw_deg)},
-                {"sit_start_yaw_deg_std", StdOf(start_yaw_deg)},
-                {"planner", o.planner.ToJson()}};
+    plan_json = Json{{"sit_start",
+                      {{"x_m", sit_start.xy.x()},
+                       {"y_m", sit_start.xy.y()},
+                       {"yaw_deg", sit_start.yaw * 180.0 / M_PI}}},
+                     {"turn_left_calibration", calibration[0].ToJson()},
+                     {"turn_right_calibration", calibration[1].ToJson()},
+                     {"handover_pred_err_m_mean", MeanOf(handover_err)},
+                     {"sit_start_along_m_mean", MeanOf(start_along)},
+                     {"sit_start_along_m_std", StdOf(start_along)},
+                     {"sit_start_across_m_mean", MeanOf(start_across)},
+                     {"sit_start_across_m_std", StdOf(start_across)},
+                     {"sit_start_yaw_deg_mean", MeanOf(start_yaw_deg)},
+                     {"sit_start_yaw_deg_std", StdOf(start_yaw_deg)},
+                     {"planner", o.planner.ToJson()}};
   }
   return Json{{"task", "chain"},
-              {"plan", plan},
+              {"plan", plan_json},
               {"decision_period", o.decision_period},
               {"zone", config.env.spawn.zone},
               {"chair", config.env.chair},

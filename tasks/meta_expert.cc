@@ -11,16 +11,6 @@
 
 namespace perch {
 
-Json MetaPlan::ToJson() const {
-  return Json{{"config", config.ToJson()},
-              {"sit_start",
-               {{"x_m", sit_start.xy.x()},
-                {"y_m", sit_start.xy.y()},
-                {"yaw_deg", sit_start.yaw * 180.0 / M_PI}}},
-              {"turn_left_calibration", turns[0].ToJson()},
-              {"turn_right_calibration", turns[1].ToJson()}};
-}
-
 MetaPlan BuildMetaPlan(const TaskEnvConfig& config, const std::vector<FrozenPolicyData>& frozen,
                        const PlannerConfig& planner) {
   if (config.env.task != "sit_chair") {
@@ -47,20 +37,7 @@ MetaPlan BuildMetaPlan(const TaskEnvConfig& config, const std::vector<FrozenPoli
   }
   SubtaskPolicies policies(models, names, saved, {true, true, true, false});
   std::unique_ptr<HumanoidChairEnv> env = MakeTaskHumanoidEnv(config);
-  auto& task = const_cast<SitChairTask&>(dynamic_cast<const SitChairTask&>(env->task()));
-  MetaPlan plan;
-  plan.config = planner;
-  for (int side = 0; side < 2; ++side) {
-    const int id = side == 0 ? kLeftTurn : kRightTurn;
-    task.set_active(id);
-    plan.turns[side] = CalibrateTurn(*env, policies, id, planner.calibration_runs,
-                                     planner.calibration_seed, planner.turn_max_s);
-  }
-  plan.sit_start = SitClipStart(saved[kSit], config.env, "planner: sit policy " + names[kSit]);
-  const double chair_yaw = config.env.chair_placement.yaw;
-  plan.sit_start.xy +=
-      Eigen::Rotation2Dd(chair_yaw) * Eigen::Vector2d(planner.aim_m[0], planner.aim_m[1]);
-  return plan;
+  return MeasurePlan(*env, policies, saved[kSit], names[kSit], planner);
 }
 
 void MetaPlanner::Reset() {
@@ -81,12 +58,7 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
             : c.side == "right" ? 1
                                 : (AngleDiff(p.sit_start.yaw, root.yaw) >= 0 ? 0 : 1);
   }
-  PlanRule rule;
-  rule.reach_m = c.reach_m;
-  rule.pass_m = c.pass_m;
-  rule.lookahead_m = c.lookahead_m;
-  rule.tolerance_rad = c.sit_yaw_deg * M_PI / 180.0;
-  rule.approach_rad = c.approach_deg < 0 ? -1.0 : c.approach_deg * M_PI / 180.0;
+  const PlanRule rule = MakePlanRule(c, c.sit_yaw_deg);
   int want = env.active();
   if (want != last_active_) {
     // It began at the start of the last meta step (or at the reset).
@@ -97,7 +69,8 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
   Eigen::Vector2d target =
       root.xy + c.lookahead_m * Eigen::Vector2d(std::cos(root.yaw), std::sin(root.yaw));
   if (want == kWalk) {
-    const std::vector<double> features = TurnStartFeatures(h);
+    const std::vector<double> features =
+        c.regress_start_state ? TurnStartFeatures(h) : std::vector<double>();
     const PlanView v = PlanStep(root, p.sit_start, p.turns[side_], side_ == 0, rule,
                                 c.regress_start_state ? &features : nullptr);
     // Around the chair when the way to the turn's start passes it (zones 2 and 3).
@@ -109,8 +82,9 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
     }
   } else if (want == kLeftTurn || want == kRightTurn) {
     const double t = (h.episode_step() - active_since_step_) * dt;
-    if (t >= c.turn_max_s || (t >= 0.3 && SitNow(root.yaw, h.humanoid_state().root_ang_vel.z(),
-                                                 p.sit_start.yaw, rule.tolerance_rad, period_s))) {
+    if (t >= c.turn_max_s ||
+        (t >= c.turn_min_s && SitNow(root.yaw, h.humanoid_state().root_ang_vel.z(), p.sit_start.yaw,
+                                     rule.tolerance_rad, period_s))) {
       want = kSit;
     }
   }

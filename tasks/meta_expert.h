@@ -21,15 +21,6 @@ namespace perch {
 
 class MetaEnv;
 
-// What the planner knows, measured once for a config and its frozen subtasks (immutable; shared
-// by the threads of an evaluation).
-struct MetaPlan {
-  PlannerConfig config;
-  PlanarPose sit_start;                  // the aim point (sit clip start + aim_m)
-  std::array<TurnCalibration, 2> turns;  // left, right
-  Json ToJson() const;
-};
-
 MetaPlan BuildMetaPlan(const TaskEnvConfig& config, const std::vector<FrozenPolicyData>& frozen,
                        const PlannerConfig& planner);
 
