@@ -159,7 +159,14 @@ Json TurnCalibration::ToJson() const {
                     {"forward_std_m", disp_std[k].x()},
                     {"left_std_m", disp_std[k].y()}});
   }
-  return Json{{"runs", runs}, {"fell", fell}, {"path", path}};
+  Json starts = Json::array();
+  for (size_t r = 0; r < start_features.size(); ++r) {
+    starts.push_back({{"features", start_features[r]},
+                      {"fell", static_cast<bool>(start_fell[r])},
+                      {"end_step", start_end_step[r]},
+                      {"end_rotation_deg", start_end_rotation[r] * 180.0 / M_PI}});
+  }
+  return Json{{"runs", runs}, {"fell", fell}, {"path", path}, {"starts", starts}};
 }
 
 TurnCalibration CalibrateTurn(HumanoidChairEnv& env, SubtaskPolicies& policies, int id, int runs,
@@ -182,7 +189,8 @@ TurnCalibration CalibrateTurn(HumanoidChairEnv& env, SubtaskPolicies& policies, 
     std::vector<double> rot(steps);
     std::vector<Eigen::Vector2d> d(steps);
     bool fell = false;
-    for (int k = 0; k < steps; ++k) {
+    int ran = 0;
+    for (int k = 0; k < steps; ++k, ++ran) {
       policies.Act(id, env, rng, true, action.data());
       if (env.Step(action.data(), obs.data()).terminated) {
         fell = true;
@@ -194,6 +202,10 @@ TurnCalibration CalibrateTurn(HumanoidChairEnv& env, SubtaskPolicies& policies, 
       rot[k] = std::abs(unwrapped);
       d[k] = Rotate(-yaw0, env.humanoid_state().root_pos.head<2>() - xy0);
     }
+    c.start_features.push_back(features);
+    c.start_fell.push_back(fell);
+    c.start_end_step.push_back(ran);
+    c.start_end_rotation.push_back(std::abs(unwrapped));
     if (fell) {
       ++c.fell;
       continue;

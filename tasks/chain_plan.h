@@ -40,6 +40,11 @@ struct TurnCalibration {
   std::vector<std::vector<double>> run_features;
   std::vector<std::vector<double>> run_rotation;       // [run][k] [rad]
   std::vector<std::vector<Eigen::Vector2d>> run_disp;  // [run][k] [m]
+  // Every run, fallen or not: its start features and whether it fell (what a fall depends on).
+  std::vector<std::vector<double>> start_features;
+  std::vector<bool> start_fell;
+  std::vector<int> start_end_step;         // [run] control steps run (to the fall, or all)
+  std::vector<double> start_end_rotation;  // [run] |yaw change| then [rad]
   // The displacement when the turn has rotated by `rotation_rad` (first step that reaches it;
   // the last one when the turn never does).
   Eigen::Vector2d DisplacementAt(double rotation_rad) const;

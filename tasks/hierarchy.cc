@@ -328,6 +328,7 @@ Json EvaluateChain(const TaskEnvConfig& config,
     env->SetWalkTarget(target);
     int phase = kWalk, phase_start = 0, run = 0, begun = -1;
     std::string turn_taken;
+    Json sit_from = nullptr;  // where this episode's sit began (plan only)
     const bool plan_left = o.side == "left"    ? true
                            : o.side == "right" ? false
                                                : AngleDiff(sit_start.yaw, env->RootRpy().z()) >= 0;
@@ -388,6 +389,7 @@ Json EvaluateChain(const TaskEnvConfig& config,
           start_along.push_back(rel.x());
           start_across.push_back(rel.y());
           start_yaw_deg.push_back(AngleDiff(env->RootRpy().z(), sit_start.yaw) * 180.0 / M_PI);
+          sit_from = Json::array({rel.x(), rel.y(), start_yaw_deg.back()});
         }
         if (o.sit_starts != nullptr) {
           o.sit_starts->push_back(CaptureState(*env));
@@ -430,8 +432,8 @@ Json EvaluateChain(const TaskEnvConfig& config,
       }
     }
     successes += success;
-    per_episode.push_back(
-        {task.spawn_theta() * 180.0 / M_PI, turn_taken, fell ? SubtaskName(phase) : "", success});
+    per_episode.push_back({task.spawn_theta() * 180.0 / M_PI, turn_taken,
+                           fell ? SubtaskName(phase) : "", success, sit_from});
     if (o.recorder != nullptr) o.recorder->End(success, fell);
     falls += fell;
     min_dists.push_back(min_dist);

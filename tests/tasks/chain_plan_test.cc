@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "tasks/hierarchy.h"
@@ -172,6 +173,14 @@ TEST(ChainPlan, PlanOfTheDeliveredSubtasks) {
     // Left turns drift left, right turns right.
     EXPECT_GT((side == 0 ? 1 : -1) * t.disp.back().y(), 0.1) << side;
     EXPECT_GT(t.disp.back().x(), 0.3) << side;
+    // Every run's start is kept with whether it fell, and the survivors' starts are theirs.
+    ASSERT_EQ(t.start_features.size(), static_cast<size_t>(t.runs + t.fell));
+    EXPECT_EQ(std::count(t.start_fell.begin(), t.start_fell.end(), true), t.fell);
+    size_t kept = 0;
+    for (size_t r = 0; r < t.start_fell.size(); ++r) {
+      if (!t.start_fell[r]) EXPECT_EQ(t.start_features[r], t.run_features[kept++]) << r;
+    }
+    EXPECT_EQ(t.ToJson()["starts"].size(), t.start_features.size());
   }
   // A meta without the turns cannot be planned for.
   TaskEnvConfig walk_only = c;
@@ -194,6 +203,44 @@ TEST(ChainPlan, PlanOfTheDeliveredSubtasks) {
     EXPECT_EQ(seq.rfind("walk", 0), 0u) << seq;
     EXPECT_EQ(seq.find("sit>"), std::string::npos) << seq;  // sit is never left
   }
+}
+
+TEST(ChainPlan, ThePlannedChainRecordsWhereEachSitBegan) {
+  const TaskEnvConfig c = PlannedMeta(4);
+  std::array<proto::ModelWeights, kNumSubtasks> models;
+  std::array<std::string, kNumSubtasks> names;
+  std::array<Json, kNumSubtasks> saved;
+  for (const FrozenPolicyData& f : LoadFrozenPolicies(c)) {
+    const int id = SubtaskIdOf(f.name);
+    ASSERT_GE(id, 0) << f.name;
+    ASSERT_TRUE(models[id].ParseFromString(f.model)) << f.name;
+    names[id] = f.name;
+    saved[id] = Json::parse(f.saved_config);
+  }
+  ChainOptions o;
+  o.episodes = 6;
+  o.seed = 3;
+  o.plan = true;
+  o.planner.calibration_runs = 4;
+  o.sit_yaw_deg = 25;
+  o.stop_at_sit = true;
+  const Json j = EvaluateChain(c, models, names, saved, o, nullptr);
+  ASSERT_EQ(j["episodes_detail"].size(), 6u);
+  std::vector<double> along;
+  for (const Json& e : j["episodes_detail"]) {
+    // [spawn azimuth, turn, subtask it fell in, success, sit start (along, across, yaw) or null]
+    ASSERT_EQ(e.size(), 5u);
+    if (e[4].is_null()) continue;
+    EXPECT_EQ(e[2], "");  // it reached the sit, so it did not fall before
+    along.push_back(e[4][0].get<double>());
+    // Handed over within the tolerance of the sit's heading, from the turn's side.
+    EXPECT_LE(std::abs(e[4][2].get<double>()), 25.0 + 1e-9);
+  }
+  ASSERT_EQ(static_cast<int>(along.size()), j["reached_sit"].get<int>());
+  ASSERT_FALSE(along.empty());
+  double mean = 0;
+  for (double a : along) mean += a / along.size();
+  EXPECT_NEAR(j["plan"]["sit_start_along_m_mean"].get<double>(), mean, 1e-9);
 }
 
 TEST(MetaClone, ClonesThePlannersChoicesAndDaggerAddsTheClonesStates) {
