@@ -303,6 +303,7 @@ MetaPlan MeasurePlan(HumanoidChairEnv& env, SubtaskPolicies& policies, const Jso
   plan.config = planner;
   for (int side = 0; side < 2; ++side) {
     const int id = side == 0 ? kLeftTurn : kRightTurn;
+    if (!PlannerTakesTurn(planner, id)) continue;
     task.set_active(id);
     plan.turns[side] = CalibrateTurn(env, policies, id, planner.calibration_runs,
                                      planner.calibration_seed, planner.turn_max_s);
@@ -311,6 +312,12 @@ MetaPlan MeasurePlan(HumanoidChairEnv& env, SubtaskPolicies& policies, const Jso
   plan.sit_start.xy += Eigen::Rotation2Dd(env.config().chair_placement.yaw) *
                        Eigen::Vector2d(planner.aim_m[0], planner.aim_m[1]);
   return plan;
+}
+
+bool PlannerTakesTurn(const PlannerConfig& planner, int turn_id) {
+  if (planner.side == "left") return turn_id == kLeftTurn;
+  if (planner.side == "right") return turn_id == kRightTurn;
+  return turn_id == kLeftTurn || turn_id == kRightTurn;
 }
 
 bool SitNow(double yaw, double yaw_rate, double sit_yaw, double tol, double period_s) {

@@ -122,8 +122,12 @@ struct MetaPlan {
 
 // Measures a plan on `env` (a sit_chair env; its resets are the calibration runs' starts) with
 // the turns of `policies` (run for up to planner.turn_max_s) and the sit model's saved config.
+// Only the turns planner.side can take are measured (both for "short"; the other one's
+// calibration stays empty), so a one-turn meta (Table 3's baselines) can be planned for.
 MetaPlan MeasurePlan(HumanoidChairEnv& env, SubtaskPolicies& policies, const Json& sit_saved,
                      const std::string& sit_name, const PlannerConfig& planner);
+// Whether planner.side takes this turn (kLeftTurn / kRightTurn).
+bool PlannerTakesTurn(const PlannerConfig& planner, int turn_id);
 
 struct PlanView {
   Eigen::Vector2d walk_target = Eigen::Vector2d::Zero();    // world [m]

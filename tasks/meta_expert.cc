@@ -30,12 +30,13 @@ MetaPlan BuildMetaPlan(const TaskEnvConfig& config, const std::vector<FrozenPoli
     have[id] = true;
   }
   for (int id : {kLeftTurn, kRightTurn, kSit}) {
-    if (!have[id]) {
+    if (!have[id] && (id == kSit || PlannerTakesTurn(planner, id))) {
       throw ConfigError(std::string("planner: needs the ") + SubtaskName(id) +
-                        " subtask among sit_chair.meta.choices");
+                        " subtask among sit_chair.meta.choices (planner.side \"" + planner.side +
+                        "\")");
     }
   }
-  SubtaskPolicies policies(models, names, saved, {true, true, true, false});
+  SubtaskPolicies policies(models, names, saved, {have[kLeftTurn], have[kRightTurn], true, false});
   std::unique_ptr<HumanoidChairEnv> env = MakeTaskHumanoidEnv(config);
   return MeasurePlan(*env, policies, saved[kSit], names[kSit], planner);
 }

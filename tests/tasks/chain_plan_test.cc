@@ -187,6 +187,17 @@ TEST(ChainPlan, PlanOfTheDeliveredSubtasks) {
   walk_only.MutableSection<SitChairTaskConfig>().meta.choices = {"walk"};
   EXPECT_THROW(BuildMetaPlan(walk_only, LoadFrozenPolicies(walk_only), PlannerConfig()),
                ConfigError);
+  // A one-turn meta (Table 3) is planned for when the planner's side is that turn's, and only
+  // that turn is measured; turning the short way needs both.
+  TaskEnvConfig left_only = c;
+  left_only.MutableSection<SitChairTaskConfig>().meta.choices = {"turn_left", "sit", "walk"};
+  PlannerConfig left = c.Section<SitChairTaskConfig>().meta.planner;
+  EXPECT_THROW(BuildMetaPlan(left_only, LoadFrozenPolicies(left_only), left), ConfigError);
+  left.side = "left";
+  const MetaPlan one = BuildMetaPlan(left_only, LoadFrozenPolicies(left_only), left);
+  EXPECT_GE(one.turns[0].runs, 1);
+  EXPECT_EQ(one.turns[1].runs + one.turns[1].fell, 0);
+  EXPECT_NEAR(one.sit_start.xy.x(), plan.sit_start.xy.x(), 1e-9);
 
   // Driving the meta env at 2 Hz it runs walk -> turn -> sit and sits in some trials (the
   // trials are deterministic for their seed).
