@@ -415,64 +415,99 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                         config.env.task + "\"");
     }
     if (config.env.task == "sit_chair") {
+      if (o->cfg.chair == "all" && (!o->filmstrip.empty() || !o->matrix_png.empty())) {
+        throw ConfigError("--filmstrip / --matrix-png: not with --chair all (name one chair)");
+      }
       // The meta controller on the main task: the authors' zones as defined (whatever spawn the
-      // run trained with), walk start states from the evaluation bank (docs/meta.md).
-      TaskEnvConfig mc = config;
-      mc.env.spawn = SpawnConfig();
-      mc.env.spawn.zone = chain->zone;
-      mc.MutableSection<SitChairTaskConfig>().start.banks = {"data/banks/walk_end_poses_eval.bin"};
-      const std::string model_file = o->planner ? "" : ModelFile(o->model);
-      std::vector<FrozenPolicyData> frozen;
-      if (!o->planner) frozen = FrozenPoliciesIn(o->model);
-      if (frozen.empty()) frozen = LoadFrozenPolicies(mc);
-      MetaEvalOptions mo;
-      if (o->planner) {
-        mo.planner = std::make_shared<const MetaPlan>(
-            BuildMetaPlan(mc, frozen, mc.Section<SitChairTaskConfig>().meta.planner));
-      }
-      mo.trials = o->trials > 0 ? o->trials : o->eval.episodes;
-      mo.seed = o->eval.seed;
-      mo.stochastic = o->eval.stochastic;
-      mo.threads = o->threads;
-      const auto t0 = std::chrono::steady_clock::now();
-      const int every = std::max(1, mo.trials / 20);
-      mo.progress = [&](int done, int successes) {
-        if (done % every != 0 && done != mo.trials) return;
-        const double sec =
-            std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        std::cerr << "eval: " << done << "/" << mo.trials << " trials, success "
-                  << static_cast<double>(successes) / done << " so far, " << static_cast<int>(sec)
-                  << " s\n";
-      };
-      MetaTrialFrames ok, bad;
-      const bool film = !o->filmstrip.empty();
-      Json result = EvaluateMeta(mc, o->planner ? proto::ModelWeights() : LoadModelFile(model_file),
-                                 frozen, mo, film ? &ok : nullptr, film ? &bad : nullptr);
-      result["model"] = o->planner ? Json("planner") : Json(model_file);
-      result["wall_s"] =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      if (film) {
-        const Chair chair = Chair::Load(mc.env.ChairPath());
-        const HumanoidModel model = HumanoidModel::Load(mc.env.HumanoidPath());
-        FilmstripOptions fo;
-        fo.panel_px = o->panel_px;
-        fo.follow = !o->fixed_window;
-        // <name>.png: the first success; <name>_failure.png: the first failure.
-        const std::string base = o->filmstrip.substr(0, o->filmstrip.rfind(".png"));
-        for (const MetaTrialFrames* t : {&ok, &bad}) {
-          if (t->frames.empty()) continue;
-          const std::string path = t->success ? base + ".png" : base + "_failure.png";
-          RenderFilmstrip(model, &chair, mc.env.chair_placement.Transform(),
-                          PickFrames(t->frames, o->frames), fo)
-              .SavePng(path);
-          result[t->success ? "filmstrip_success" : "filmstrip_failure"] = {{"path", path},
-                                                                            {"trial", t->trial}};
+      // run trained with), walk start states from the evaluation bank (docs/meta.md). The
+      // planner is measured on each chair (where the sit's clip starts depends on it).
+      auto evaluate_meta = [&](const TaskEnvConfig& on_chair) -> Json {
+        TaskEnvConfig mc = on_chair;
+        mc.env.spawn = SpawnConfig();
+        mc.env.spawn.zone = chain->zone;
+        mc.MutableSection<SitChairTaskConfig>().start.banks = {
+            "data/banks/walk_end_poses_eval.bin"};
+        const std::string model_file = o->planner ? "" : ModelFile(o->model);
+        std::vector<FrozenPolicyData> frozen;
+        if (!o->planner) frozen = FrozenPoliciesIn(o->model);
+        if (frozen.empty()) frozen = LoadFrozenPolicies(mc);
+        MetaEvalOptions mo;
+        if (o->planner) {
+          mo.planner = std::make_shared<const MetaPlan>(
+              BuildMetaPlan(mc, frozen, mc.Section<SitChairTaskConfig>().meta.planner));
         }
+        mo.trials = o->trials > 0 ? o->trials : o->eval.episodes;
+        mo.seed = o->eval.seed;
+        mo.stochastic = o->eval.stochastic;
+        mo.threads = o->threads;
+        const auto t0 = std::chrono::steady_clock::now();
+        const int every = std::max(1, mo.trials / 20);
+        mo.progress = [&](int done, int successes) {
+          if (done % every != 0 && done != mo.trials) return;
+          const double sec =
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+          std::cerr << "eval: " << done << "/" << mo.trials << " trials, success "
+                    << static_cast<double>(successes) / done << " so far, " << static_cast<int>(sec)
+                    << " s\n";
+        };
+        MetaTrialFrames ok, bad;
+        const bool film = !o->filmstrip.empty();
+        Json result =
+            EvaluateMeta(mc, o->planner ? proto::ModelWeights() : LoadModelFile(model_file), frozen,
+                         mo, film ? &ok : nullptr, film ? &bad : nullptr);
+        result["model"] = o->planner ? Json("planner") : Json(model_file);
+        result["wall_s"] =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        if (film) {
+          const Chair chair = Chair::Load(mc.env.ChairPath());
+          const HumanoidModel model = HumanoidModel::Load(mc.env.HumanoidPath());
+          FilmstripOptions fo;
+          fo.panel_px = o->panel_px;
+          fo.follow = !o->fixed_window;
+          // <name>.png: the first success; <name>_failure.png: the first failure.
+          const std::string base = o->filmstrip.substr(0, o->filmstrip.rfind(".png"));
+          for (const MetaTrialFrames* t : {&ok, &bad}) {
+            if (t->frames.empty()) continue;
+            const std::string path = t->success ? base + ".png" : base + "_failure.png";
+            RenderFilmstrip(model, &chair, mc.env.chair_placement.Transform(),
+                            PickFrames(t->frames, o->frames), fo)
+                .SavePng(path);
+            result[t->success ? "filmstrip_success" : "filmstrip_failure"] = {{"path", path},
+                                                                              {"trial", t->trial}};
+          }
+        }
+        if (!o->matrix_png.empty()) {
+          SaveTransitionMatrixPng(result, o->matrix_png);
+          result["transition_matrix_png"] = o->matrix_png;
+        }
+        return result;
+      };
+      if (o->cfg.chair == "all") {
+        // Every preset in data/chairs/, one row each (the many-chairs table).
+        Json table = Json::object();
+        for (const std::string& preset : Chair::PresetNames()) {
+          ConfigOverrides co = o->cfg;
+          co.chair = preset;
+          std::cerr << "eval: chair " << preset << "\n";
+          Json r = evaluate_meta(ResolveConfig(co, o->model));
+          r.erase("sequences");
+          table[preset] = r;
+        }
+        Json all{{"task", "sit_chair"},
+                 {"model", o->planner ? Json("planner") : Json(ModelFile(o->model))},
+                 {"zone", chain->zone},
+                 {"per_chair", table}};
+        if (o->json) {
+          std::cout << all.dump() << "\n";
+        } else {
+          for (const auto& [name, r] : table.items()) {
+            std::cout << "sit_chair zone " << chain->zone << " chair " << name << ": success_rate "
+                      << r["success_rate"] << " " << r["success_ci95"].dump() << "\n";
+          }
+        }
+        return;
       }
-      if (!o->matrix_png.empty()) {
-        SaveTransitionMatrixPng(result, o->matrix_png);
-        result["transition_matrix_png"] = o->matrix_png;
-      }
+      const Json result = evaluate_meta(config);
       if (o->json) {
         std::cout << result.dump() << "\n";
       } else {

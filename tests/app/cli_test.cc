@@ -168,6 +168,30 @@ TEST_F(CliTest, SitEvalReportsWhereTheSeatedBodyIsAndTheBackrestPushesItForward)
   }
 }
 
+TEST_F(CliTest, MetaEvalOverEveryChairPlansOnEachChair) {
+  // Each chair gets its own row, planned on that chair (the planner's turns are measured in
+  // its env); one trial per chair keeps it short.
+  const std::string src = PERCH_SOURCE_DIR;
+  const std::string base = "eval --task sit_chair --planner --config " + src +
+                           "/configs/meta_zone1_plan2_30hz.json --zone 1 --trials 1 --seed 2 "
+                           "--threads 1 --json --chair all";
+  Result r = Perch(base, false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Json j = Json::parse(r.out);
+  ASSERT_TRUE(j.contains("per_chair")) << r.out;
+  EXPECT_EQ(j["per_chair"].size(), 6u);
+  for (const auto& [name, row] : j["per_chair"].items()) {
+    EXPECT_EQ(row["chair"], name);
+    EXPECT_EQ(row["trials"], 1);
+    EXPECT_EQ(row["decider"], "planner");
+    EXPECT_GE(row["planner"]["turn_left_calibration"]["runs"].get<int>(), 1) << name;
+  }
+  // Pictures are per chair: asking for one over all chairs is refused, naming the flag.
+  r = Perch(base + " --filmstrip /tmp/perch_all_chairs.png");
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "--filmstrip")) << r.out;
+}
+
 TEST_F(CliTest, TrainEndsByItselfAtMaxSamplesWithASummary) {
   // A fresh clone has no runs/: train creates the run dir's parents.
   const std::string dir = ::testing::TempDir() + "perch_cli_train/nested/run";
