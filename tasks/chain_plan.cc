@@ -159,14 +159,14 @@ Json TurnCalibration::ToJson() const {
                     {"forward_std_m", disp_std[k].x()},
                     {"left_std_m", disp_std[k].y()}});
   }
-  Json starts = Json::array();
-  for (size_t r = 0; r < start_features.size(); ++r) {
-    starts.push_back({{"features", start_features[r]},
-                      {"fell", static_cast<bool>(start_fell[r])},
-                      {"end_step", start_end_step[r]},
-                      {"end_rotation_deg", start_end_rotation[r] * 180.0 / M_PI}});
+  Json all_starts = Json::array();
+  for (const Start& st : starts) {
+    all_starts.push_back({{"features", st.features},
+                          {"fell", st.fell},
+                          {"end_step", st.end_step},
+                          {"end_rotation_deg", st.end_rotation_rad * 180.0 / M_PI}});
   }
-  return Json{{"runs", runs}, {"fell", fell}, {"path", path}, {"starts", starts}};
+  return Json{{"runs", runs}, {"fell", fell}, {"path", path}, {"starts", all_starts}};
 }
 
 TurnCalibration CalibrateTurn(HumanoidChairEnv& env, SubtaskPolicies& policies, int id, int runs,
@@ -202,10 +202,7 @@ TurnCalibration CalibrateTurn(HumanoidChairEnv& env, SubtaskPolicies& policies, 
       rot[k] = std::abs(unwrapped);
       d[k] = Rotate(-yaw0, env.humanoid_state().root_pos.head<2>() - xy0);
     }
-    c.start_features.push_back(features);
-    c.start_fell.push_back(fell);
-    c.start_end_step.push_back(ran);
-    c.start_end_rotation.push_back(std::abs(unwrapped));
+    c.starts.push_back({features, fell, ran, std::abs(unwrapped)});
     if (fell) {
       ++c.fell;
       continue;

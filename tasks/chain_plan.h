@@ -40,11 +40,14 @@ struct TurnCalibration {
   std::vector<std::vector<double>> run_features;
   std::vector<std::vector<double>> run_rotation;       // [run][k] [rad]
   std::vector<std::vector<Eigen::Vector2d>> run_disp;  // [run][k] [m]
-  // Every run, fallen or not: its start features and whether it fell (what a fall depends on).
-  std::vector<std::vector<double>> start_features;
-  std::vector<bool> start_fell;
-  std::vector<int> start_end_step;         // [run] control steps run (to the fall, or all)
-  std::vector<double> start_end_rotation;  // [run] |yaw change| then [rad]
+  // Every run, fallen or not (what a fall depends on, and when it comes).
+  struct Start {
+    std::vector<double> features;  // TurnStartFeatures
+    bool fell = false;
+    int end_step = 0;               // control steps run (to the fall, or all)
+    double end_rotation_rad = 0.0;  // |yaw change| then
+  };
+  std::vector<Start> starts;
   // The displacement when the turn has rotated by `rotation_rad` (first step that reaches it;
   // the last one when the turn never does).
   Eigen::Vector2d DisplacementAt(double rotation_rad) const;

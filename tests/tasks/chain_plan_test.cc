@@ -174,13 +174,17 @@ TEST(ChainPlan, PlanOfTheDeliveredSubtasks) {
     EXPECT_GT((side == 0 ? 1 : -1) * t.disp.back().y(), 0.1) << side;
     EXPECT_GT(t.disp.back().x(), 0.3) << side;
     // Every run's start is kept with whether it fell, and the survivors' starts are theirs.
-    ASSERT_EQ(t.start_features.size(), static_cast<size_t>(t.runs + t.fell));
-    EXPECT_EQ(std::count(t.start_fell.begin(), t.start_fell.end(), true), t.fell);
+    ASSERT_EQ(t.starts.size(), static_cast<size_t>(t.runs + t.fell));
+    EXPECT_EQ(std::count_if(t.starts.begin(), t.starts.end(),
+                            [](const TurnCalibration::Start& st) { return st.fell; }),
+              t.fell);
     size_t kept = 0;
-    for (size_t r = 0; r < t.start_fell.size(); ++r) {
-      if (!t.start_fell[r]) EXPECT_EQ(t.start_features[r], t.run_features[kept++]) << r;
+    for (size_t r = 0; r < t.starts.size(); ++r) {
+      if (!t.starts[r].fell) {
+        EXPECT_EQ(t.starts[r].features, t.run_features[kept++]) << r;
+      }
     }
-    EXPECT_EQ(t.ToJson()["starts"].size(), t.start_features.size());
+    EXPECT_EQ(t.ToJson()["starts"].size(), t.starts.size());
   }
   // A meta without the turns cannot be planned for.
   TaskEnvConfig walk_only = c;
