@@ -8,21 +8,23 @@
 #include "app/commands.h"
 #include "common/file_util.h"
 #include "common/json_util.h"
+#include "common/paths.h"
 #include "learner/service/checkpoint.h"
 #include "learner/service/wire.h"
 #include "tasks/hierarchy.h"
 #include "tasks/meta_clone.h"
 #include "tasks/meta_expert.h"
+#include "tasks/model_source.h"
 #include "tasks/task_env.h"
 
 namespace perch {
 
 void RegisterMetaCommands(CLI::App& root, CLI::App& /*bench*/) {
   struct Opts {
-    std::string config, out;
+    std::string config, out, init_from;
     std::vector<std::string> sets;
     CloneOptions clone;
-    bool json = false;
+    bool json = false, stage = false;
   };
   auto o = std::make_shared<Opts>();
   o->clone.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
@@ -54,6 +56,12 @@ void RegisterMetaCommands(CLI::App& root, CLI::App& /*bench*/) {
       ->check(CLI::Range(-5.0, 1.0));
   cmd->add_option("--seed", o->clone.seed, "episodes and shuffling");
   cmd->add_option("--threads", o->clone.threads, "collection threads")->check(CLI::Range(1, 256));
+  cmd->add_option("--init-from", o->init_from,
+                  "a curriculum stage: start from this meta policy (the previous stage's "
+                  "checkpoint); round 1 is then a DAgger round driven by it");
+  cmd->add_flag("--stage", o->stage,
+                "a curriculum stage: start from the config's cluster.init_from (the previous "
+                "stage's checkpoint), as --init-from does");
   cmd->add_flag("--json", o->json, "print one JSON summary on stdout");
   cmd->callback([o]() {
     // Never replace a saved model: a typo in --out must not cost a result.
@@ -64,8 +72,25 @@ void RegisterMetaCommands(CLI::App& root, CLI::App& /*bench*/) {
       throw ConfigError(o->config + ": env.task is \"" + config.env.task +
                         "\"; meta-clone needs sit_chair");
     }
+    if (o->stage) {
+      if (!o->init_from.empty()) throw ConfigError("meta-clone: --stage or --init-from, not both");
+      if (c.cluster.init_from.empty()) {
+        throw ConfigError(o->config + ": --stage needs cluster.init_from (the previous stage)");
+      }
+      o->init_from = ResolveProjectPath(c.cluster.init_from);
+    }
+    if (!o->init_from.empty()) o->clone.init = LoadModelFile(o->init_from);
     const std::vector<FrozenPolicyData> frozen = ExperimentFrozenPolicies(c);
     const PolicyConfig pc = ResolvePolicyConfig(c, MakeExperimentEnv(c)->spec());
+    if (o->clone.init) {
+      // Refuse a start of another shape now, not after the planner's calibration.
+      PolicyRunner check(pc, c.ppo.obs_norm);
+      try {
+        check.LoadWeights(*o->clone.init);
+      } catch (const ConfigError& e) {
+        throw ConfigError(o->init_from + ": does not fit the config's meta network: " + e.what());
+      }
+    }
     std::cerr << "meta-clone: measuring the turns for the planner\n";
     auto plan = std::make_shared<const MetaPlan>(
         BuildMetaPlan(config, frozen, config.Section<SitChairTaskConfig>().meta.planner));
@@ -89,6 +114,9 @@ void RegisterMetaCommands(CLI::App& root, CLI::App& /*bench*/) {
     Json summary = r.summary;
     summary["out"] = o->out;
     summary["config"] = ToJson(c);
+    // Which curriculum stage this is: the zone it was cloned on and the stage it started from.
+    summary["stage"] = Json{{"zone", config.env.spawn.zone},
+                            {"init_from", o->init_from.empty() ? Json() : Json(o->init_from)}};
     WriteFileAtomic(o->out + ".json", summary.dump(2) + "\n");
     if (o->json) {
       std::cout << summary.dump() << "\n";

@@ -71,7 +71,8 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
     const std::string sc = ctx + ".spawn";
     CheckKnownKeys(s,
                    {"zone", "x", "y", "yaw_deg", "center_x", "center_y", "radius", "radius_max",
-                    "yaw_noise_deg", "zone1_deg", "zone2_deg", "zone3_deg"},
+                    "yaw_noise_deg", "zone1_deg", "zone2_deg", "zone3_deg", "hard_center_x",
+                    "hard_center_y", "hard_radius"},
                    sc);
     GetOptional(s, "zone", c.spawn.zone, sc);
     GetOptional(s, "x", c.spawn.x, sc);
@@ -85,6 +86,10 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
     GetOptional(s, "zone1_deg", c.spawn.zone1_deg, sc);
     GetOptional(s, "zone2_deg", c.spawn.zone2_deg, sc);
     GetOptional(s, "zone3_deg", c.spawn.zone3_deg, sc);
+    GetOptional(s, "hard_center_x", c.spawn.hard_center_x, sc);
+    GetOptional(s, "hard_center_y", c.spawn.hard_center_y, sc);
+    GetOptional(s, "hard_radius", c.spawn.hard_radius, sc);
+    if (!(c.spawn.hard_radius >= 0.0)) throw ConfigError(sc + ".hard_radius: must be >= 0");
     if (c.spawn.zone < 0 || c.spawn.zone > 3)
       throw ConfigError(sc + ".zone: expected 0, 1, 2 or 3");
     if (!(c.spawn.radius >= 0.0)) throw ConfigError(sc + ".radius: must be >= 0");
@@ -211,7 +216,10 @@ Json EnvConfig::ToJson() const {
         {"yaw_noise_deg", spawn.yaw_noise_deg},
         {"zone1_deg", spawn.zone1_deg},
         {"zone2_deg", spawn.zone2_deg},
-        {"zone3_deg", spawn.zone3_deg}}},
+        {"zone3_deg", spawn.zone3_deg},
+        {"hard_center_x", spawn.hard_center_x},
+        {"hard_center_y", spawn.hard_center_y},
+        {"hard_radius", spawn.hard_radius}}},
       {"init",
        {{"qpos_file", init.qpos_file},
         {"qpos_array", init.qpos_array},

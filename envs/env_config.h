@@ -45,7 +45,19 @@ struct SpawnConfig {
   std::array<double, 2> zone1_deg{0.0, 90.0};     // authors' code: theta ~ U(-90, 90) deg
   std::array<double, 2> zone2_deg{90.0, 135.0};   // our proposal (notes 6): lateral sides
   std::array<double, 2> zone3_deg{135.0, 180.0};  // our proposal: rear side
+  // Zones 2 and 3 (ours, docs/meta.md): the paper puts the Hard starts "again roughly 2 meters
+  // away" from the chair; Zone 1's circle is only 1.05 m from the chair centre at the rear. So
+  // zones 2 and 3 use their own circle around (hard_center_x, hard_center_y), the chair centre.
+  // hard_radius 0: Zone 1's circle (our reading before 2026-12-04, stop 34).
+  double hard_center_x = 0.0, hard_center_y = 0.0;  // [m]
+  double hard_radius = 2.0;                          // [m]
 };
+
+// The circle a zone's starts lie on, chair frame: centre x, y and radius [m].
+struct SpawnCircle {
+  double center_x = 0.0, center_y = 0.0, radius = 0.0;
+};
+SpawnCircle ZoneCircle(const SpawnConfig& c, int zone);
 
 // The initial pose that spawning moves around: standing (all angles 0 clipped to the limits),
 // or a row of a 51-column qpos array in an npz file (notes 7.2), e.g. the authors' Zone 1 start

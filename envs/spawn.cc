@@ -4,6 +4,13 @@
 
 namespace perch {
 
+SpawnCircle ZoneCircle(const SpawnConfig& c, int zone) {
+  if ((zone == 2 || zone == 3) && c.hard_radius > 0.0) {
+    return {c.hard_center_x, c.hard_center_y, c.hard_radius};
+  }
+  return {c.center_x, c.center_y, c.radius};
+}
+
 SpawnPose SampleSpawn(const SpawnConfig& c, Rng& rng) {
   SpawnPose s;
   if (c.zone == 0) {
@@ -18,10 +25,15 @@ SpawnPose SampleSpawn(const SpawnConfig& c, Rng& rng) {
   const double magnitude = rng.Uniform(r[0], r[1]) * M_PI / 180.0;
   const double sign = rng.Uniform() < 0.5 ? -1.0 : 1.0;
   s.theta = sign * magnitude;
-  // Extra draws only when asked for, so the authors' zones keep their random streams.
-  const double radius = c.radius_max > c.radius ? rng.Uniform(c.radius, c.radius_max) : c.radius;
-  s.x = c.center_x + radius * std::cos(s.theta);
-  s.y = c.center_y + radius * std::sin(s.theta);
+  const SpawnCircle circle = ZoneCircle(c, c.zone);
+  const bool zone1_circle = circle.radius == c.radius && circle.center_x == c.center_x &&
+                            circle.center_y == c.center_y;
+  // Extra draws only when asked for (Zone 1's circle), so the zones keep their random streams.
+  const double radius = zone1_circle && c.radius_max > c.radius
+                            ? rng.Uniform(c.radius, c.radius_max)
+                            : circle.radius;
+  s.x = circle.center_x + radius * std::cos(s.theta);
+  s.y = circle.center_y + radius * std::sin(s.theta);
   s.yaw_added = s.theta + M_PI;  // facing the centre
   if (c.yaw_noise_deg > 0.0) {
     s.yaw_added += rng.Uniform(-c.yaw_noise_deg, c.yaw_noise_deg) * M_PI / 180.0;

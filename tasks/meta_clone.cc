@@ -68,6 +68,16 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
     throw ConfigError("meta-clone: dagger beta must be in [0, 1]");
   }
   ActorCritic model(pc, o.seed);
+  if (o.init) {
+    model.CheckShape(o.init->shape(), "meta-clone --init-from");
+    if (o.init->params_size() != model.num_params()) {
+      throw ConfigError("meta-clone --init-from: " + std::to_string(o.init->params_size()) +
+                        " parameters, the config's meta network has " +
+                        std::to_string(model.num_params()));
+    }
+    std::copy(o.init->params().begin(), o.init->params().end(), model.params().data());
+    if (!model.params().allFinite()) throw ConfigError("meta-clone --init-from: NaN/Inf weights");
+  }
   RunningMeanStd stats(pc.obs_dim, norm.initial_count);
   Adam adam(model.num_params(), 0.9f, 0.999f, 1e-5f);
   std::vector<float> all_obs, all_labels;
@@ -84,9 +94,12 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
     weights.set_obs_eps(norm.obs_eps);
     weights.set_normalize_obs(norm.normalize_obs);
   };
+  if (o.init) weights = *o.init;
   for (int round = 0; round < o.rounds; ++round) {
     // --- collect (episodes spread over threads; episode i always gets the same seed) ---
-    const double beta = round == 0 ? 1.0 : o.dagger_beta;
+    // Round 1 is plain cloning, unless a previous stage's policy is there to drive it.
+    const bool dagger = round > 0 || o.init.has_value();
+    const double beta = dagger ? o.dagger_beta : 1.0;
     std::vector<Episode> eps(o.episodes);
     std::atomic<int> next{0};
     std::exception_ptr error;
@@ -97,7 +110,7 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
         env.SetFrozenPolicies(frozen);
         MetaPlanner planner(plan);
         std::unique_ptr<PolicyRunner> runner;
-        if (round > 0) {
+        if (dagger) {
           runner = std::make_unique<PolicyRunner>(pc, norm);
           runner->LoadWeights(weights);
           runner->set_update_obs_stats(false);
@@ -128,7 +141,7 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
     if (o.progress) {
       o.progress("meta-clone: round " + std::to_string(round + 1) + "/" + std::to_string(o.rounds) +
                  ": " + std::to_string(o.episodes) + " episodes (" +
-                 (round == 0 ? std::string("planner") : "planner with p " + std::to_string(beta)) +
+                 (!dagger ? std::string("planner") : "planner with p " + std::to_string(beta)) +
                  "), success " + std::to_string(static_cast<double>(successes) / o.episodes) +
                  ", " + std::to_string(n) + " samples in all");
     }
@@ -225,6 +238,7 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
                    {"learning_rate", o.learning_rate},
                    {"target_log_std", o.target_log_std},
                    {"dagger_beta", o.dagger_beta},
+                   {"init_from_stage", o.init.has_value()},
                    {"seed", o.seed},
                    {"planner", plan->ToJson()}};
   return r;

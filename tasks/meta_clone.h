@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "common/env.h"
@@ -38,6 +39,10 @@ struct CloneOptions {
   float target_log_std = -1.0f;
   uint64_t seed = 0;
   int threads = 1;
+  // A curriculum stage (ours; issue 15): start from this meta policy (the previous stage's), so
+  // that round 1 is already a DAgger round driven by it and the fit continues from its weights.
+  // Empty: a fresh network and plain cloning in round 1.
+  std::optional<proto::ModelWeights> init;
   std::function<void(const std::string&)> progress;  // one line per round / epoch block
 };
 

@@ -192,6 +192,31 @@ TEST_F(CliTest, MetaEvalOverEveryChairPlansOnEachChair) {
   EXPECT_TRUE(Has(r.out, "--filmstrip")) << r.out;
 }
 
+TEST_F(CliTest, MetaCloneStageStartsFromTheConfigsPreviousStageOrSaysWhy) {
+  const std::string src = PERCH_SOURCE_DIR;
+  const std::string out = ::testing::TempDir() + "perch_stage_clone.bin";
+  std::filesystem::remove(out);
+  // The Zone 1 config's cluster.init_from is the PPO meta of 57 inputs (the planner's configs
+  // observe 62): a clone stage cannot continue from it, and the message names file and field.
+  Result r = Perch("meta-clone --config " + src + "/configs/meta_zone1_plan2_30hz.json --stage --out " +
+                   out + " --episodes 1");
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "meta_zone1/policy.bin: does not fit")) << r.out;
+  EXPECT_TRUE(Has(r.out, "obs_dim")) << r.out;
+  EXPECT_FALSE(std::filesystem::exists(out));
+  // Without an init_from there is no previous stage to name.
+  const std::string cfg = ::testing::TempDir() + "perch_stage_none.json";
+  std::ofstream(cfg) << R"({"base": ")" << src
+                     << R"(/configs/meta_zone1_plan2_30hz.json", "cluster": {"init_from": ""}})";
+  r = Perch("meta-clone --config " + cfg + " --stage --out " + out);
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "--stage needs cluster.init_from")) << r.out;
+  // Both ways at once is ambiguous.
+  r = Perch("meta-clone --config " + cfg + " --stage --init-from x.bin --out " + out);
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "--stage or --init-from")) << r.out;
+}
+
 TEST_F(CliTest, TrainEndsByItselfAtMaxSamplesWithASummary) {
   // A fresh clone has no runs/: train creates the run dir's parents.
   const std::string dir = ::testing::TempDir() + "perch_cli_train/nested/run";

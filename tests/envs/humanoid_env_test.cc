@@ -526,8 +526,9 @@ TEST(Spawn, ZonesFollowTheirGeometry) {
       EXPECT_GE(deg, zones[zone - 1][0]);
       EXPECT_LE(deg, zones[zone - 1][1]);
       negative += p.theta < 0;
-      const Eigen::Vector2d to_center(c.center_x - p.x, c.center_y - p.y);
-      EXPECT_NEAR(to_center.norm(), c.radius, 1e-9);
+      const SpawnCircle circle = ZoneCircle(c, zone);
+      const Eigen::Vector2d to_center(circle.center_x - p.x, circle.center_y - p.y);
+      EXPECT_NEAR(to_center.norm(), circle.radius, 1e-9);
       // A pose with yaw 0 spawned this way faces the centre.
       const HumanoidState h = PlaceAtSpawn(HumanoidState{}, p, ChairPlacement{});
       const Eigen::Vector3d heading = h.root_quat * Eigen::Vector3d::UnitX();
@@ -535,6 +536,37 @@ TEST(Spawn, ZonesFollowTheirGeometry) {
     }
     EXPECT_GT(negative, 100);  // both sides
     EXPECT_LT(negative, 200);
+  }
+}
+
+// Zone 1 is the authors' half circle (1.57-1.95 m from the chair centre); zones 2 and 3 start
+// "again roughly 2 meters away" (the paper) unless hard_radius 0 asks for Zone 1's circle.
+TEST(Spawn, HardZonesStartTwoMetresFromTheChair) {
+  SpawnConfig c;
+  Rng rng(3);
+  for (int zone = 1; zone <= 3; ++zone) {
+    c.zone = zone;
+    for (int i = 0; i < 100; ++i) {
+      const SpawnPose p = SampleSpawn(c, rng);
+      const double from_chair = std::hypot(p.x, p.y);
+      if (zone == 1) {
+        EXPECT_GE(from_chair, 1.5);
+        EXPECT_LE(from_chair, 1.95 + 1e-9);
+      } else {
+        EXPECT_NEAR(from_chair, 2.0, 1e-9);
+      }
+    }
+  }
+  c.hard_radius = 0.0;  // the old reading: Zone 1's circle, 1.05 m behind the chair centre
+  c.zone = 3;
+  c.zone3_deg = {180.0, 180.0};
+  const SpawnPose rear = SampleSpawn(c, rng);
+  EXPECT_NEAR(rear.x, 0.45 - 1.5, 1e-9);
+  try {
+    EnvConfig::FromJson({{"spawn", {{"hard_radius", -1.0}}}}, "cfg");
+    ADD_FAILURE() << "a negative radius was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("cfg.spawn.hard_radius"), std::string::npos) << e.what();
   }
 }
 

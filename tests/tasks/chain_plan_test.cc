@@ -286,5 +286,54 @@ TEST(MetaClone, ClonesThePlannersChoicesAndDaggerAddsTheClonesStates) {
             r.weights.SerializeAsString());
 }
 
+// A curriculum stage starts from the previous stage's meta policy: its first round is driven by
+// that policy (a DAgger round), and the fit continues from its weights.
+TEST(MetaClone, AStageStartsFromThePreviousStagesPolicy) {
+  const TaskEnvConfig c = PlannedMeta(2);
+  const std::vector<FrozenPolicyData> frozen = LoadFrozenPolicies(c);
+  auto plan = std::make_shared<const MetaPlan>(
+      BuildMetaPlan(c, frozen, c.Section<SitChairTaskConfig>().meta.planner));
+  const PolicyConfig pc = PolicyConfig::Meta(62);
+  CloneOptions o;
+  o.episodes = 6;
+  o.epochs = 20;
+  o.threads = 2;
+  o.seed = 7;
+  const CloneResult first = CloneMeta(c, frozen, pc, NormalizerConfig(), plan, o);
+  EXPECT_DOUBLE_EQ(first.summary["rounds"][0]["planner_acts_prob"].get<double>(), 1.0);
+
+  CloneOptions stage = o;
+  stage.init = first.weights;
+  stage.dagger_beta = 0.0;     // the previous stage acts alone; the planner only labels
+  stage.learning_rate = 1e-7f;  // so that the fit barely moves the weights
+  stage.epochs = 1;
+  const CloneResult next = CloneMeta(c, frozen, pc, NormalizerConfig(), plan, stage);
+  EXPECT_DOUBLE_EQ(next.summary["rounds"][0]["planner_acts_prob"].get<double>(), 0.0);
+  EXPECT_TRUE(next.summary["init_from_stage"].get<bool>());
+  ASSERT_EQ(next.weights.params_size(), first.weights.params_size());
+  double max_diff = 0, max_fresh = 0;
+  CloneOptions fresh = stage;
+  fresh.init.reset();
+  const CloneResult scratch = CloneMeta(c, frozen, pc, NormalizerConfig(), plan, fresh);
+  for (int i = 0; i < first.weights.params_size(); ++i) {
+    max_diff = std::max(max_diff, std::abs(double(next.weights.params(i)) - first.weights.params(i)));
+    max_fresh =
+        std::max(max_fresh, std::abs(double(scratch.weights.params(i)) - first.weights.params(i)));
+  }
+  EXPECT_LT(max_diff, 1e-3);   // continued from the first stage's weights
+  EXPECT_GT(max_fresh, 1e-2);  // a fresh network is elsewhere
+
+  // A network of another shape is refused, naming the option.
+  proto::ModelWeights wrong = first.weights;
+  wrong.mutable_params()->RemoveLast();
+  stage.init = wrong;
+  try {
+    CloneMeta(c, frozen, pc, NormalizerConfig(), plan, stage);
+    ADD_FAILURE() << "a mismatched start was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("--init-from"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace perch

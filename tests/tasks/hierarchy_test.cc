@@ -55,9 +55,10 @@ TEST(Hierarchy, SpawnsWalkingInTheZoneFacingItsCentre) {
       const auto& r = zone == 1 ? env->config().spawn.zone1_deg : env->config().spawn.zone3_deg;
       EXPECT_GE(std::abs(theta) * 180 / M_PI, r[0] - 1e-9);
       EXPECT_LE(std::abs(theta) * 180 / M_PI, r[1] + 1e-9);
-      const Eigen::Vector2d c(env->config().spawn.center_x, env->config().spawn.center_y);
+      const SpawnCircle circle = ZoneCircle(env->config().spawn, zone);
+      const Eigen::Vector2d c(circle.center_x, circle.center_y);
       const Eigen::Vector2d p = env->humanoid_state().root_pos.head<2>();
-      EXPECT_NEAR((p - c).norm(), env->config().spawn.radius, 1e-6);
+      EXPECT_NEAR((p - c).norm(), circle.radius, 1e-6);
       const double to_centre = std::atan2(c.y() - p.y(), c.x() - p.x());
       EXPECT_NEAR(AngleDiff(env->RootRpy().z(), to_centre), 0.0, 1e-6);
       EXPECT_GT(env->humanoid_state().root_lin_vel.norm(), 0.3);  // mid-stride, walking
