@@ -72,7 +72,7 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
     CheckKnownKeys(s,
                    {"zone", "x", "y", "yaw_deg", "center_x", "center_y", "radius", "radius_max",
                     "yaw_noise_deg", "zone1_deg", "zone2_deg", "zone3_deg", "hard_center_x",
-                    "hard_center_y", "hard_radius"},
+                    "hard_center_y", "hard_radius", "zones"},
                    sc);
     GetOptional(s, "zone", c.spawn.zone, sc);
     GetOptional(s, "x", c.spawn.x, sc);
@@ -90,6 +90,13 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
     GetOptional(s, "hard_center_y", c.spawn.hard_center_y, sc);
     GetOptional(s, "hard_radius", c.spawn.hard_radius, sc);
     if (!(c.spawn.hard_radius >= 0.0)) throw ConfigError(sc + ".hard_radius: must be >= 0");
+    GetOptional(s, "zones", c.spawn.zones, sc);
+    for (int z : c.spawn.zones) {
+      if (z < 1 || z > 3) throw ConfigError(sc + ".zones: each must be 1, 2 or 3");
+    }
+    if (!c.spawn.zones.empty() && c.spawn.zone == 0) {
+      throw ConfigError(sc + ".zones: needs zone 1-3 (zone 0 is the fixed pose)");
+    }
     if (c.spawn.zone < 0 || c.spawn.zone > 3)
       throw ConfigError(sc + ".zone: expected 0, 1, 2 or 3");
     if (!(c.spawn.radius >= 0.0)) throw ConfigError(sc + ".radius: must be >= 0");
@@ -219,7 +226,8 @@ Json EnvConfig::ToJson() const {
         {"zone3_deg", spawn.zone3_deg},
         {"hard_center_x", spawn.hard_center_x},
         {"hard_center_y", spawn.hard_center_y},
-        {"hard_radius", spawn.hard_radius}}},
+        {"hard_radius", spawn.hard_radius},
+        {"zones", spawn.zones}}},
       {"init",
        {{"qpos_file", init.qpos_file},
         {"qpos_array", init.qpos_array},

@@ -4,6 +4,7 @@
 
 #include <array>
 #include <string>
+#include <vector>
 
 #include "common/json_util.h"
 #include "envs/humanoid_world.h"
@@ -51,6 +52,9 @@ struct SpawnConfig {
   // hard_radius 0: Zone 1's circle (our reading before 2026-12-04, stop 34).
   double hard_center_x = 0.0, hard_center_y = 0.0;  // [m]
   double hard_radius = 2.0;                          // [m]
+  // Ours: when not empty, each episode's zone is drawn uniformly from these (1-3) instead of
+  // `zone`: a curriculum stage that keeps the earlier stages' zones (docs/meta.md).
+  std::vector<int> zones;
 };
 
 // The circle a zone's starts lie on, chair frame: centre x, y and radius [m].

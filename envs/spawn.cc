@@ -19,13 +19,16 @@ SpawnPose SampleSpawn(const SpawnConfig& c, Rng& rng) {
     s.yaw_added = c.yaw_deg * M_PI / 180.0;
     return s;
   }
-  const std::array<double, 2>& r = c.zone == 1   ? c.zone1_deg
-                                   : c.zone == 2 ? c.zone2_deg
-                                                 : c.zone3_deg;
+  // A draw only for a mixture, so the single zones keep their random streams.
+  const int zone = c.zones.empty() ? c.zone
+                                   : c.zones[rng.UniformInt(static_cast<int>(c.zones.size()))];
+  const std::array<double, 2>& r = zone == 1   ? c.zone1_deg
+                                   : zone == 2 ? c.zone2_deg
+                                               : c.zone3_deg;
   const double magnitude = rng.Uniform(r[0], r[1]) * M_PI / 180.0;
   const double sign = rng.Uniform() < 0.5 ? -1.0 : 1.0;
   s.theta = sign * magnitude;
-  const SpawnCircle circle = ZoneCircle(c, c.zone);
+  const SpawnCircle circle = ZoneCircle(c, zone);
   const bool zone1_circle = circle.radius == c.radius && circle.center_x == c.center_x &&
                             circle.center_y == c.center_y;
   // Extra draws only when asked for (Zone 1's circle), so the zones keep their random streams.

@@ -26,7 +26,7 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   CheckKnownKeys(j,
                  {"pass_m", "reach_m", "lookahead_m", "aim_m", "sit_yaw_deg", "turn_max_s",
                   "turn_min_s", "calibration_runs", "calibration_seed", "side", "approach_deg",
-                  "regress_start_state", "clearance_m"},
+                  "regress_start_state", "clearance_m", "avoid_front_m"},
                  ctx);
   PlannerConfig c;
   GetOptional(j, "pass_m", c.pass_m, ctx);
@@ -42,6 +42,10 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "approach_deg", c.approach_deg, ctx);
   GetOptional(j, "regress_start_state", c.regress_start_state, ctx);
   GetOptional(j, "clearance_m", c.clearance_m, ctx);
+  GetOptional(j, "avoid_front_m", c.avoid_front_m, ctx);
+  if (!(c.avoid_front_m >= -3 && c.avoid_front_m <= 3)) {
+    throw ConfigError(ctx + ".avoid_front_m: must be in [-3, 3] m");
+  }
   if (!(c.clearance_m >= 0 && c.clearance_m <= 3)) {
     throw ConfigError(ctx + ".clearance_m: must be in [0, 3] m");
   }
@@ -87,7 +91,8 @@ Json PlannerConfig::ToJson() const {
               {"side", side},
               {"approach_deg", approach_deg},
               {"regress_start_state", regress_start_state},
-              {"clearance_m", clearance_m}};
+              {"clearance_m", clearance_m},
+              {"avoid_front_m", avoid_front_m}};
 }
 
 Eigen::Vector2d TurnCalibration::DisplacementAt(double rotation) const {
@@ -271,6 +276,14 @@ Eigen::Vector2d AvoidChair(const Eigen::Vector2d& root, const Eigen::Vector2d& t
   // walker passes it rather than circles it.
   const double s = (target - chair_xy).dot(side) >= 0 ? 1.0 : -1.0;
   return chair_xy + clearance_m * (s * side + 0.3 * u).normalized();
+}
+
+Eigen::Vector2d WalkAroundChair(const Eigen::Vector2d& root, const Eigen::Vector2d& target,
+                                const Eigen::Vector2d& chair_xy, double facing_yaw,
+                                double clearance_m, double avoid_front_m) {
+  const double in_front =
+      (root - chair_xy).dot(Eigen::Vector2d(std::cos(facing_yaw), std::sin(facing_yaw)));
+  return in_front < avoid_front_m ? AvoidChair(root, target, chair_xy, clearance_m) : target;
 }
 
 PlanRule MakePlanRule(const PlannerConfig& c, double sit_yaw_deg) {

@@ -98,6 +98,10 @@ struct PlannerConfig {
   // Walk around the chair: a walk target behind it (seen from the root) is replaced by a point
   // this far from the seat centre, beside it (zones 2 and 3 start behind the chair) [m]; 0: off.
   double clearance_m = 0.6;
+  // ... only while the root is less than this far in front of the seat centre, along the
+  // chair's facing [m] (ours, stop 34): a start in front (Zone 1) walks straight to its turn, one
+  // beside or behind the chair (zones 2, 3) rounds it first. 3: everywhere (the rule before).
+  double avoid_front_m = 3.0;
 
   static PlannerConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;
@@ -151,6 +155,11 @@ PlanView PlanStep(const PlanarPose& root, const PlanarPose& sit, const TurnCalib
 // then the tangent-side point clearance_m from the chair (the side nearer the target).
 Eigen::Vector2d AvoidChair(const Eigen::Vector2d& root, const Eigen::Vector2d& target,
                            const Eigen::Vector2d& chair_xy, double clearance_m);
+// AvoidChair while the root is less than `avoid_front_m` in front of `chair_xy` along the
+// chair's facing `facing_yaw` [rad]; `target` unchanged once it is further in front.
+Eigen::Vector2d WalkAroundChair(const Eigen::Vector2d& root, const Eigen::Vector2d& target,
+                                const Eigen::Vector2d& chair_xy, double facing_yaw,
+                                double clearance_m, double avoid_front_m);
 
 // Walk -> turn now: the predicted end is within reach_m, or within pass_m and the next decision
 // (period_s later, the root moving at root_vel with its heading held) would find it further.

@@ -76,7 +76,8 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
                                 c.regress_start_state ? &features : nullptr);
     // Around the chair when the way to the turn's start passes it (zones 2 and 3).
     const Eigen::Vector2d around =
-        AvoidChair(root.xy, v.start_point, h.SeatTargetWorld().head<2>(), c.clearance_m);
+        WalkAroundChair(root.xy, v.start_point, h.SeatTargetWorld().head<2>(), p.sit_start.yaw,
+                        c.clearance_m, c.avoid_front_m);
     target = around == v.start_point ? v.walk_target : around;
     if (HandOverNow(v, h.humanoid_state().root_lin_vel.head<2>(), period_s, p.sit_start.xy, rule)) {
       want = side_ == 0 ? kLeftTurn : kRightTurn;

@@ -570,6 +570,35 @@ TEST(Spawn, HardZonesStartTwoMetresFromTheChair) {
   }
 }
 
+// A stage that keeps the earlier zones: each episode draws one of `zones`, on that zone's circle.
+TEST(Spawn, AZoneMixtureDrawsEachZoneOnItsOwnCircle) {
+  SpawnConfig c;
+  c.zone = 3;
+  c.zones = {1, 3};
+  Rng rng(5);
+  int front = 0, rear = 0;
+  for (int i = 0; i < 400; ++i) {
+    const SpawnPose p = SampleSpawn(c, rng);
+    const double deg = std::abs(p.theta) * 180.0 / M_PI;
+    if (deg <= 90.0) {
+      ++front;
+      EXPECT_NEAR(std::hypot(p.x - c.center_x, p.y - c.center_y), c.radius, 1e-9);
+    } else {
+      ++rear;
+      EXPECT_GE(deg, 135.0);
+      EXPECT_NEAR(std::hypot(p.x, p.y), c.hard_radius, 1e-9);
+    }
+  }
+  EXPECT_GT(front, 150);
+  EXPECT_GT(rear, 150);
+  try {
+    EnvConfig::FromJson({{"spawn", {{"zone", 1}, {"zones", {1, 4}}}}}, "cfg");
+    ADD_FAILURE() << "zone 4 was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("cfg.spawn.zones"), std::string::npos) << e.what();
+  }
+}
+
 TEST(HumanoidEnv, MalformedChairAndConfigNameFileAndField) {
   const std::string bad_chair = ::testing::TempDir() + "bad_chair.json";
   std::ofstream(bad_chair)

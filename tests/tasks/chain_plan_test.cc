@@ -117,6 +117,23 @@ TEST(ChainPlan, WalksAroundTheChairOnlyWhenTheWayPassesIt) {
   EXPECT_EQ(AvoidChair({-1.5, 0.0}, {1.0, 0.3}, chair, 0.0), Eigen::Vector2d(1.0, 0.3));  // off
 }
 
+TEST(ChainPlan, RoundsTheChairOnlyFromBesideOrBehindIt) {
+  const Eigen::Vector2d chair(0.0, 0.0);
+  const double facing = 0.0;  // the chair faces +x
+  // From in front (1.0 m out) to a turn start whose way passes the seat within 1.2 m: straight.
+  const Eigen::Vector2d ahead(1.3, 0.9);
+  EXPECT_EQ(WalkAroundChair({1.0, -1.0}, ahead, chair, facing, 1.2, 0.3), ahead);
+  // The old rule (everywhere) would have sent it around.
+  EXPECT_NE(WalkAroundChair({1.0, -1.0}, ahead, chair, facing, 1.2, 3.0), ahead);
+  // From behind: around, as AvoidChair says.
+  EXPECT_EQ(WalkAroundChair({-1.5, 0.0}, {1.0, 0.3}, chair, facing, 1.2, 0.3),
+            AvoidChair({-1.5, 0.0}, {1.0, 0.3}, chair, 1.2));
+  EXPECT_NE(WalkAroundChair({-1.5, 0.0}, {1.0, 0.3}, chair, facing, 1.2, 0.3),
+            Eigen::Vector2d(1.0, 0.3));
+  // The facing decides what "in front" is: the same root is behind a chair facing -x.
+  EXPECT_NE(WalkAroundChair({1.0, -1.0}, ahead, chair, M_PI, 1.2, 0.3), ahead);
+}
+
 TEST(ChainPlan, SitNowAtTheToleranceOrAtTheClosestDecision) {
   const double tol = 15 * M_PI / 180;
   EXPECT_TRUE(SitNow(0.1, 2.0, 0.0, tol, 0.0165));
@@ -131,7 +148,8 @@ TEST(ChainPlan, PlannerConfigIsStrictAndNamesTheField) {
   const PlannerConfig c = PlannerConfig::FromJson(PlannerConfig().ToJson(), "p");
   EXPECT_EQ(c.ToJson(), PlannerConfig().ToJson());
   for (const Json& bad : {Json{{"pass", 0.3}}, Json{{"side", "up"}}, Json{{"reach_m", 2.0}},
-                          Json{{"aim_m", {3.0, 0.0}}}, Json{{"pass_m", "x"}}}) {
+                          Json{{"aim_m", {3.0, 0.0}}}, Json{{"pass_m", "x"}},
+                          Json{{"avoid_front_m", 5.0}}}) {
     try {
       PlannerConfig::FromJson(bad, "sit_chair.meta.planner");
       ADD_FAILURE() << "accepted " << bad.dump();
