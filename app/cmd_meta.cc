@@ -1,4 +1,5 @@
 // perch meta-clone: the scripted planner cloned into a meta policy (tasks/meta_clone.h).
+#include <chrono>
 #include <filesystem>
 #include <iostream>
 #include <memory>
@@ -91,6 +92,7 @@ void RegisterMetaCommands(CLI::App& root, CLI::App& /*bench*/) {
         throw ConfigError(o->init_from + ": does not fit the config's meta network: " + e.what());
       }
     }
+    const auto t0 = std::chrono::steady_clock::now();
     std::cerr << "meta-clone: measuring the turns for the planner\n";
     auto plan = std::make_shared<const MetaPlan>(
         BuildMetaPlan(config, frozen, config.Section<SitChairTaskConfig>().meta.planner));
@@ -113,6 +115,9 @@ void RegisterMetaCommands(CLI::App& root, CLI::App& /*bench*/) {
     WriteFileAtomic(o->out, FrameCheckpoint(ck));
     Json summary = r.summary;
     summary["out"] = o->out;
+    // The stage's cost (issue 15 asks for meta steps, samples and wall time per stage).
+    summary["wall_s"] =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     summary["config"] = ToJson(c);
     // Which curriculum stage this is: the zone it was cloned on and the stage it started from.
     summary["stage"] = Json{{"zone", config.env.spawn.zone},
