@@ -85,9 +85,8 @@ void RegisterMetaCommands(CLI::App& root, CLI::App& /*bench*/) {
     const PolicyConfig pc = ResolvePolicyConfig(c, MakeExperimentEnv(c)->spec());
     if (o->clone.init) {
       // Refuse a start of another shape now, not after the planner's calibration.
-      PolicyRunner check(pc, c.ppo.obs_norm);
       try {
-        check.LoadWeights(*o->clone.init);
+        CheckCloneInit(pc, c.ppo.obs_norm, *o->clone.init);
       } catch (const ConfigError& e) {
         throw ConfigError(o->init_from + ": does not fit the config's meta network: " + e.what());
       }

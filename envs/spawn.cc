@@ -4,10 +4,16 @@
 
 namespace perch {
 
+namespace {
+
+bool OnHardCircle(const SpawnConfig& c, int zone) {
+  return (zone == 2 || zone == 3) && c.hard_radius > 0.0;
+}
+
+}  // namespace
+
 SpawnCircle ZoneCircle(const SpawnConfig& c, int zone) {
-  if ((zone == 2 || zone == 3) && c.hard_radius > 0.0) {
-    return {c.hard_center_x, c.hard_center_y, c.hard_radius};
-  }
+  if (OnHardCircle(c, zone)) return {c.hard_center_x, c.hard_center_y, c.hard_radius};
   return {c.center_x, c.center_y, c.radius};
 }
 
@@ -29,10 +35,8 @@ SpawnPose SampleSpawn(const SpawnConfig& c, Rng& rng) {
   const double sign = rng.Uniform() < 0.5 ? -1.0 : 1.0;
   s.theta = sign * magnitude;
   const SpawnCircle circle = ZoneCircle(c, zone);
-  const bool zone1_circle = circle.radius == c.radius && circle.center_x == c.center_x &&
-                            circle.center_y == c.center_y;
   // Extra draws only when asked for (Zone 1's circle), so the zones keep their random streams.
-  const double radius = zone1_circle && c.radius_max > c.radius
+  const double radius = !OnHardCircle(c, zone) && c.radius_max > c.radius
                             ? rng.Uniform(c.radius, c.radius_max)
                             : circle.radius;
   s.x = circle.center_x + radius * std::cos(s.theta);

@@ -56,6 +56,16 @@ Episode Collect(MetaEnv& env, MetaPlanner& planner, PolicyRunner* runner, double
 
 }  // namespace
 
+void CheckCloneInit(const PolicyConfig& pc, const NormalizerConfig& norm,
+                    const proto::ModelWeights& init) {
+  PolicyRunner runner(pc, norm);
+  try {
+    runner.LoadWeights(init);  // shape, parameter count, finite values
+  } catch (const ConfigError& e) {
+    throw ConfigError(std::string("meta-clone --init-from: ") + e.what());
+  }
+}
+
 CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolicyData>& frozen,
                       const PolicyConfig& pc, const NormalizerConfig& norm,
                       std::shared_ptr<const MetaPlan> plan, const CloneOptions& o) {
@@ -69,14 +79,8 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
   }
   ActorCritic model(pc, o.seed);
   if (o.init) {
-    model.CheckShape(o.init->shape(), "meta-clone --init-from");
-    if (o.init->params_size() != model.num_params()) {
-      throw ConfigError("meta-clone --init-from: " + std::to_string(o.init->params_size()) +
-                        " parameters, the config's meta network has " +
-                        std::to_string(model.num_params()));
-    }
+    CheckCloneInit(pc, norm, *o.init);
     std::copy(o.init->params().begin(), o.init->params().end(), model.params().data());
-    if (!model.params().allFinite()) throw ConfigError("meta-clone --init-from: NaN/Inf weights");
   }
   RunningMeanStd stats(pc.obs_dim, norm.initial_count);
   Adam adam(model.num_params(), 0.9f, 0.999f, 1e-5f);

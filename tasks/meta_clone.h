@@ -51,6 +51,11 @@ struct CloneResult {
   Json summary;  // samples, per round: planner success, accuracy of the switch, target error
 };
 
+// Throws ConfigError "meta-clone --init-from: ..." unless `init` loads as the meta policy `pc`
+// (shape, parameter count, finite weights).
+void CheckCloneInit(const PolicyConfig& pc, const NormalizerConfig& norm,
+                    const proto::ModelWeights& init);
+
 // pc: the meta policy as the experiment config resolves it (kind meta, the config's inputs and
 // choices). frozen: the subtasks (as the learner ships them).
 CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolicyData>& frozen,
