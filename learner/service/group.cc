@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstring>
@@ -112,12 +113,21 @@ bool ZmqGroup::Send(const std::string& routing_id, char op, uint64_t seq,
   return true;
 }
 
-bool ZmqGroup::Receive(std::vector<zmq::message_t>* parts, double deadline) {
+bool ZmqGroup::Receive(std::vector<zmq::message_t>* parts, double deadline, bool part_sent) {
   const size_t want = options_.rank == 0 ? 3 : 2;  // [routing id,] header, payload
   for (;;) {
     if (options_.stop && options_.stop->load()) {
-      Leave();
-      throw GroupStopped("learner group: this member is stopping");
+      if (!part_sent) {
+        Leave();
+        throw GroupStopped("learner group: this member is stopping");
+      }
+      // Rank 0 may already hold our part and finish this operation with it (the last one of an
+      // update, say): say bye, then take its reply or its bye, so that both sides agree on
+      // whether the operation happened. Bounded, in case rank 0 is gone.
+      if (!left_) {
+        Leave();
+        deadline = std::min(deadline, MonotonicSeconds() + kStopGraceS);
+      }
     }
     const double left = deadline - MonotonicSeconds();
     if (left <= 0) return false;
@@ -244,7 +254,8 @@ std::vector<std::string> ZmqGroup::Collect(char op, const std::string& payload) 
     if (!Send("", op, seq_, payload)) {
       fail("could not send to rank 0 within " + std::to_string(options_.timeout_s) + " s");
     }
-    if (!Receive(&parts, deadline)) {
+    if (!Receive(&parts, deadline, /*part_sent=*/true)) {
+      if (left_) throw GroupStopped("learner group: this member is stopping");
       fail("rank 0 did not answer within " + std::to_string(options_.timeout_s) + " s");
     }
     if (!ParseHeader(parts[0], &got_op, &got_seq)) fail("a malformed reply");

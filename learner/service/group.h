@@ -66,8 +66,11 @@ class ZmqGroup : public Collective {
   std::vector<std::string> Collect(char op, const std::string& payload);
   void Reply(char op, const std::string& reply);
   void Join();
-  // Receives one message within the deadline; false on timeout. Throws GroupStopped on stop.
-  bool Receive(std::vector<zmq::message_t>* parts, double deadline);
+  // Receives one message within the deadline; false on timeout. On stop: throws GroupStopped,
+  // or, once this member's part of the operation is sent (part_sent), says bye and still waits
+  // (at most kStopGraceS) for rank 0's reply or bye.
+  bool Receive(std::vector<zmq::message_t>* parts, double deadline, bool part_sent = false);
+  static constexpr double kStopGraceS = 10.0;
   // False when the message could not be queued (wait: within the send timeout; else at once).
   bool Send(const std::string& routing_id, char op, uint64_t seq, const std::string& payload,
             bool wait = true);

@@ -184,6 +184,59 @@ TEST(GroupTest, AMemberThatStopsStopsTheOthersAtTheirNextOperation) {
   EXPECT_NE(root_error.find("rank 1 stopped"), std::string::npos) << root_error;
 }
 
+// The race behind a CI failure (2026-12-05): a member stopped while waiting for the reply to a part
+// rank 0 already had; rank 0 finished that operation (the last of an update) and the member did
+// not, so the two ended one update apart. Now both finish it and both stop at the next one.
+TEST(GroupTest, AMemberThatStopsAfterSendingItsPartStillTakesTheReply) {
+  zmq::context_t ctx;
+  const std::string address = "inproc://group-stop-sent";
+  std::atomic<bool> stop1{false};
+  std::string root_next, member_next;
+  float root_sum = 0.0f, member_sum = 0.0f;
+  bool member_completed = false;
+  std::thread root([&] {
+    ZmqGroup g(ctx, Member(0, 2, address));
+    // Rank 1's part and then its bye are queued before rank 0 starts the operation.
+    while (!stop1.load()) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    float x = 1.0f;
+    g.AllReduceSum(&x, 1);
+    root_sum = x;
+    try {
+      g.AllReduceSum(&x, 1);
+      root_next = "completed";
+    } catch (const GroupStopped& e) {
+      root_next = e.what();
+    }
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  GroupOptions o = Member(1, 2, address);
+  o.stop = &stop1;
+  ZmqGroup g(ctx, o);
+  std::thread stopper([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    stop1 = true;  // while the member waits for the reply
+  });
+  float x = 2.0f;
+  try {
+    g.AllReduceSum(&x, 1);
+    member_completed = true;
+    member_sum = x;
+    g.AllReduceSum(&x, 1);
+    member_next = "completed";
+  } catch (const GroupStopped& e) {
+    member_next = e.what();
+  }
+  stopper.join();
+  root.join();
+  EXPECT_TRUE(member_completed) << "rank 0 finished the operation, rank 1 did not: " << member_next;
+  EXPECT_EQ(root_sum, 3.0f);
+  EXPECT_EQ(member_sum, 3.0f);
+  EXPECT_TRUE(g.left());
+  EXPECT_NE(member_next.find("left"), std::string::npos) << member_next;
+  EXPECT_NE(root_next.find("rank 1 stopped"), std::string::npos) << root_next;
+}
+
 TEST(GroupTest, AMissingRankZeroIsNamedAfterTheTimeout) {
   zmq::context_t ctx;
   GroupOptions o = Member(1, 2, "tcp://127.0.0.1:1");  // nothing listens there
