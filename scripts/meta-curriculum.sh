@@ -12,10 +12,15 @@
 #
 #   scripts/meta-curriculum.sh               # all stages, then the evaluations
 #   TRIALS=1000 ROUNDS=3 scripts/meta-curriculum.sh
+#   PLAN=plan3 OUT=models/sit_chair/critic OURS_ONLY=1 scripts/meta-curriculum.sh
+#     # the planner with the subtasks' critics (configs/meta_*_plan3_30hz.json), only the stages
+#     # that keep the earlier zones
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PERCH=${PERCH:-build/app/perch}
-OUT=models/sit_chair  # the stage configs' cluster.init_from point here
+OUT=${OUT:-models/sit_chair}  # the stage configs' cluster.init_from point here
+PLAN=${PLAN:-plan2}            # configs/meta_*_${PLAN}_30hz.json
+OURS_ONLY=${OURS_ONLY:-0}      # 1: skip the paper's curriculum and Table 6's w/o-CL stages
 EPISODES=${EPISODES:-300}
 ROUNDS=${ROUNDS:-3}
 ZONE1_ROUNDS=${ZONE1_ROUNDS:-5}
@@ -44,25 +49,30 @@ evaluate() {  # model zone
   mv "$json.tmp" "$json"
 }
 
-stage configs/meta_zone1_plan2_30hz.json "$OUT/stage_zone1.bin" "$ZONE1_ROUNDS"
-stage configs/meta_zone2_plan2_30hz.json "$OUT/stage_zone2.bin" "$ROUNDS" --stage
-stage configs/meta_zone3_plan2_30hz.json "$OUT/stage_zone3.bin" "$ROUNDS" --stage
-# Table 6's "w/o CL": the same configs and budget from a fresh network.
-stage configs/meta_zone2_plan2_30hz.json "$OUT/nocl_zone2.bin" "$ROUNDS"
-stage configs/meta_zone3_plan2_30hz.json "$OUT/nocl_zone3.bin" "$ROUNDS"
+C=configs/meta
+stage "${C}_zone1_${PLAN}_30hz.json" "$OUT/stage_zone1.bin" "$ZONE1_ROUNDS"
+if [ "$OURS_ONLY" != 1 ]; then
+  stage "${C}_zone2_${PLAN}_30hz.json" "$OUT/stage_zone2.bin" "$ROUNDS" --stage
+  stage "${C}_zone3_${PLAN}_30hz.json" "$OUT/stage_zone3.bin" "$ROUNDS" --stage
+  # Table 6's "w/o CL": the same configs and budget from a fresh network.
+  stage "${C}_zone2_${PLAN}_30hz.json" "$OUT/nocl_zone2.bin" "$ROUNDS"
+  stage "${C}_zone3_${PLAN}_30hz.json" "$OUT/nocl_zone3.bin" "$ROUNDS"
+fi
 # Ours: each stage keeps the earlier zones, so the last one still sits from the front.
-stage configs/meta_zones12_plan2_30hz.json "$OUT/stage_zones12.bin" "$ROUNDS" --stage
-stage configs/meta_zones123_plan2_30hz.json "$OUT/stage_zones123.bin" "$ROUNDS" --stage
+stage "${C}_zones12_${PLAN}_30hz.json" "$OUT/stage_zones12.bin" "$ROUNDS" --stage
+stage "${C}_zones123_${PLAN}_30hz.json" "$OUT/stage_zones123.bin" "$ROUNDS" --stage
 [ -f "$OUT/policy.bin" ] || cp "$OUT/stage_zones123.bin" "$OUT/policy.bin"
 
 evaluate "$OUT/stage_zone1.bin" 1
 for z in 1 2 3; do
-  evaluate "$OUT/stage_zone3.bin" $z
+  [ "$OURS_ONLY" = 1 ] || evaluate "$OUT/stage_zone3.bin" $z
   evaluate "$OUT/policy.bin" $z
 done
-evaluate "$OUT/stage_zone2.bin" 2
-evaluate "$OUT/nocl_zone2.bin" 2
-evaluate "$OUT/nocl_zone3.bin" 3
+if [ "$OURS_ONLY" != 1 ]; then
+  evaluate "$OUT/stage_zone2.bin" 2
+  evaluate "$OUT/nocl_zone2.bin" 2
+  evaluate "$OUT/nocl_zone3.bin" 3
+fi
 evaluate "$OUT/stage_zones12.bin" 1
 evaluate "$OUT/stage_zones12.bin" 2
 

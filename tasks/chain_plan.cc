@@ -24,9 +24,28 @@ Eigen::Vector2d Rotate(double yaw, const Eigen::Vector2d& v) {
 PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
   CheckKnownKeys(j,
-                 {"pass_m", "reach_m", "lookahead_m", "aim_m", "sit_yaw_deg", "turn_max_s",
-                  "turn_min_s", "calibration_runs", "calibration_seed", "side", "approach_deg",
-                  "regress_start_state", "clearance_m", "avoid_front_m"},
+                 {"pass_m",
+                  "reach_m",
+                  "lookahead_m",
+                  "aim_m",
+                  "sit_yaw_deg",
+                  "turn_max_s",
+                  "turn_min_s",
+                  "calibration_runs",
+                  "calibration_seed",
+                  "side",
+                  "approach_deg",
+                  "regress_start_state",
+                  "clearance_m",
+                  "avoid_front_m",
+                  "turn_value_min",
+                  "sit_value_min",
+                  "value_wait_s",
+                  "sit_value_early",
+                  "sit_value_yaw_deg",
+                  "turn_abort_value",
+                  "sit_retry_value",
+                  "abort_walk_min"},
                  ctx);
   PlannerConfig c;
   GetOptional(j, "pass_m", c.pass_m, ctx);
@@ -43,6 +62,30 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "regress_start_state", c.regress_start_state, ctx);
   GetOptional(j, "clearance_m", c.clearance_m, ctx);
   GetOptional(j, "avoid_front_m", c.avoid_front_m, ctx);
+  GetOptional(j, "turn_value_min", c.turn_value_min, ctx);
+  GetOptional(j, "sit_value_min", c.sit_value_min, ctx);
+  GetOptional(j, "value_wait_s", c.value_wait_s, ctx);
+  GetOptional(j, "sit_value_early", c.sit_value_early, ctx);
+  GetOptional(j, "sit_value_yaw_deg", c.sit_value_yaw_deg, ctx);
+  GetOptional(j, "turn_abort_value", c.turn_abort_value, ctx);
+  GetOptional(j, "sit_retry_value", c.sit_retry_value, ctx);
+  GetOptional(j, "abort_walk_min", c.abort_walk_min, ctx);
+  if (!(c.sit_retry_value >= 0)) {
+    throw ConfigError(ctx + ".sit_retry_value: must be >= 0 (0: off)");
+  }
+  if (!(c.turn_abort_value >= 0)) {
+    throw ConfigError(ctx + ".turn_abort_value: must be >= 0 (0: off)");
+  }
+  if (!(c.sit_value_early >= 0)) throw ConfigError(ctx + ".sit_value_early: must be >= 0 (0: off)");
+  if (!(c.sit_value_yaw_deg > 0 && c.sit_value_yaw_deg <= 90)) {
+    throw ConfigError(ctx + ".sit_value_yaw_deg: must be in (0, 90]");
+  }
+  if (!(c.turn_value_min >= 0) || !(c.sit_value_min >= 0)) {
+    throw ConfigError(ctx + ".turn_value_min / sit_value_min: must be >= 0 (0: off)");
+  }
+  if (!(c.value_wait_s >= 0 && c.value_wait_s <= 3)) {
+    throw ConfigError(ctx + ".value_wait_s: must be in [0, 3] s");
+  }
   if (!(c.avoid_front_m >= -3 && c.avoid_front_m <= 3)) {
     throw ConfigError(ctx + ".avoid_front_m: must be in [-3, 3] m");
   }
@@ -92,7 +135,15 @@ Json PlannerConfig::ToJson() const {
               {"approach_deg", approach_deg},
               {"regress_start_state", regress_start_state},
               {"clearance_m", clearance_m},
-              {"avoid_front_m", avoid_front_m}};
+              {"avoid_front_m", avoid_front_m},
+              {"turn_value_min", turn_value_min},
+              {"sit_value_min", sit_value_min},
+              {"value_wait_s", value_wait_s},
+              {"sit_value_early", sit_value_early},
+              {"sit_value_yaw_deg", sit_value_yaw_deg},
+              {"turn_abort_value", turn_abort_value},
+              {"sit_retry_value", sit_retry_value},
+              {"abort_walk_min", abort_walk_min}};
 }
 
 Eigen::Vector2d TurnCalibration::DisplacementAt(double rotation) const {

@@ -102,6 +102,29 @@ struct PlannerConfig {
   // chair's facing [m] (ours, stop 34): a start in front (Zone 1) walks straight to its turn, one
   // beside or behind the chair (zones 2, 3) rounds it first. 3: everywhere (the rule before).
   double avoid_front_m = 3.0;
+  // The value gate (ours, 2026-12-05): hand over to a turn (sit) only from a state its own critic
+  // values at least this much (SubtaskPolicies::Value, the model's value units; `perch eval --task
+  // sit_chair` reports them per hand-over as `handover_values`), waiting at most value_wait_s
+  // after the rule above first says "now". 0: off.
+  double turn_value_min = 0.0;
+  double sit_value_min = 0.0;
+  double value_wait_s = 0.25;  // [s]
+  // Turn -> sit early (ours, 2026-12-05): as soon as the sit's critic values the state at least
+  // sit_value_early and the heading is within sit_value_yaw_deg of the sit's, before the heading
+  // rule above would (the turn often stalls 30-40 deg short and the sit's chance decays). 0: off.
+  double sit_value_early = 0.0;
+  double sit_value_yaw_deg = 45.0;  // [deg]
+  // Turn -> walk (ours, 2026-12-05): a turn whose own critic (on its clock) drops below this, and
+  // below the walker's critic, hands back to the walker, which then plans the turn again. Its
+  // value falls 0.5-1 s before the fall in most falling turns and stays high in the others. 0: off.
+  double turn_abort_value = 0.0;
+  // Turn -> walk instead of sit (ours, 2026-12-05): when the sit's critic rates the hand-over
+  // below this (and below the walker's critic), the walker takes over and the approach is planned
+  // again; a sit begun from such a state falls in most trials. 0: off.
+  double sit_retry_value = 0.0;
+  // Both hand-backs to the walker also need the walker's critic at least this high (it falls
+  // after many of them otherwise). 0: no bound beyond "higher than the subtask's".
+  double abort_walk_min = 0.0;
 
   static PlannerConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;

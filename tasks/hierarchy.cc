@@ -40,7 +40,7 @@ MetaConfig MetaConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
   CheckKnownKeys(j,
                  {"choices", "period", "subtask_stochastic", "fixed_order", "observe_active",
-                  "active_time_scale_s", "subtasks", "planner"},
+                  "active_time_scale_s", "observe_values", "subtasks", "planner"},
                  ctx);
   MetaConfig c;
   GetOptional(j, "choices", c.choices, ctx);
@@ -49,6 +49,7 @@ MetaConfig MetaConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "fixed_order", c.fixed_order, ctx);
   GetOptional(j, "observe_active", c.observe_active, ctx);
   GetOptional(j, "active_time_scale_s", c.active_time_scale_s, ctx);
+  GetOptional(j, "observe_values", c.observe_values, ctx);
   if (j.contains("planner")) c.planner = PlannerConfig::FromJson(j["planner"], ctx + ".planner");
   if (!(c.active_time_scale_s > 0)) throw ConfigError(ctx + ".active_time_scale_s: must be > 0");
   if (j.contains("subtasks")) {
@@ -92,8 +93,14 @@ Json MetaConfig::ToJson() const {
               {"subtask_stochastic", subtask_stochastic},
               {"observe_active", observe_active},
               {"active_time_scale_s", active_time_scale_s},
+              {"observe_values", observe_values},
               {"planner", planner.ToJson()},
               {"subtasks", subs}};
+}
+
+int MetaConfig::obs_dim() const {
+  return ObsLayoutDim(ObsLayout::kProprioChair) + (observe_active ? kNumSubtasks + 1 : 0) +
+         (observe_values ? kNumSubtasks + 1 : 0);
 }
 
 int MetaConfig::target_choice() const {
@@ -264,18 +271,33 @@ void SubtaskPolicies::Begin(int id, const HumanoidChairEnv& env) {
 
 void SubtaskPolicies::Act(int id, const HumanoidChairEnv& env, Rng& rng, bool deterministic,
                           float* action) {
+  WriteObservation(id, env, /*running=*/true);
+  runners_[id]->Act(obs_.data(), rng, deterministic, nullptr, action);
+}
+
+void SubtaskPolicies::WriteObservation(int id, const HumanoidChairEnv& env, bool running) {
   if (runners_[id] == nullptr) {
     throw std::logic_error(std::string("SubtaskPolicies: no policy for ") + SubtaskName(id));
   }
   env.WriteObservation(Layout(id), obs_.data());
   if (heading_[id] != nullptr) {
     // The goal slots read the turn's reference heading instead of the walk target.
-    const double t = (env.episode_step() - begin_step_[id]) * env.spec().control_dt;
-    const double rel = AngleDiff(heading_[id]->GoalYaw(begin_yaw_[id], t), env.RootRpy().z());
+    const double t = running ? (env.episode_step() - begin_step_[id]) * env.spec().control_dt : 0.0;
+    const double yaw0 = running ? begin_yaw_[id] : env.RootRpy().z();
+    const double rel = AngleDiff(heading_[id]->GoalYaw(yaw0, t), env.RootRpy().z());
     obs_[50] = static_cast<float>(std::sin(rel));
     obs_[51] = static_cast<float>(std::cos(rel));
   }
-  runners_[id]->Act(obs_.data(), rng, deterministic, nullptr, action);
+}
+
+float SubtaskPolicies::Value(int id, const HumanoidChairEnv& env) {
+  WriteObservation(id, env, /*running=*/false);
+  return runners_[id]->Value(obs_.data());
+}
+
+float SubtaskPolicies::RunningValue(int id, const HumanoidChairEnv& env) {
+  WriteObservation(id, env, /*running=*/true);
+  return runners_[id]->Value(obs_.data());
 }
 
 // ---- the scripted chain ------------------------------------------------------------------------

@@ -47,6 +47,11 @@ struct MetaConfig {
   // clipped to 2), since a turn's or a sit's progress is not visible in one posture.
   bool observe_active = false;
   double active_time_scale_s = 3.0;
+  // Ours (2026-12-05, default off): the meta also observes the subtasks' own critics on the
+  // current state, each as if it began now (SubtaskId order; 0 for a subtask not among the
+  // choices), and the acting subtask's on its own clock: 5 inputs after the others. They tell
+  // which hand-over a subtask expects to survive (docs/meta.md "The subtasks' critics").
+  bool observe_values = false;
   // The scripted planner that teaches this meta (perch meta-clone) and its evaluation row
   // (perch eval --planner); tasks/meta_expert.h.
   PlannerConfig planner;
@@ -59,6 +64,7 @@ struct MetaConfig {
 
   static MetaConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;
+  int obs_dim() const;                  // 57 (+5 observe_active) (+5 observe_values)
   int target_choice() const;            // index of walk in choices
   std::vector<int> choice_ids() const;  // SubtaskId per class
 };
@@ -139,11 +145,19 @@ class SubtaskPolicies {
   void Begin(int id, const HumanoidChairEnv& env);
   // The action of subtask `id` on the env's current state (its own observation and normaliser).
   void Act(int id, const HumanoidChairEnv& env, Rng& rng, bool deterministic, float* action);
+  // Subtask `id`'s own critic on the env's current state, as if it began now (a heading-goal
+  // turn's clock at 0): how well its training expects it to do from here, in its value units.
+  float Value(int id, const HumanoidChairEnv& env);
+  // The same for the subtask running since its Begin (a heading-goal turn's clock then).
+  float RunningValue(int id, const HumanoidChairEnv& env);
   // The layout subtask `id` observes (with this set of models).
   ObsLayout Layout(int id) const;
   bool heading_goal(int id) const { return heading_[id] != nullptr; }
+  bool has(int id) const { return runners_[id] != nullptr; }
 
  private:
+  // obs_ <- subtask id's observation; a heading-goal turn's clock from its Begin (running) or 0.
+  void WriteObservation(int id, const HumanoidChairEnv& env, bool running);
   std::array<std::unique_ptr<PolicyRunner>, kNumSubtasks> runners_;
   std::array<std::unique_ptr<TurnHeadingSource>, kNumSubtasks> heading_;
   std::array<int, kNumSubtasks> begin_step_{};

@@ -31,8 +31,7 @@ MetaEnv::MetaEnv(const TaskEnvConfig& config) : config_(config) {
   if (task_ == nullptr) throw std::logic_error("meta env: the sit_chair env has another task");
   const EnvSpec& inner = env_->spec();
   // The meta observes the sit state (+ the active subtask and its time, when configured).
-  const int obs_dim =
-      ObsLayoutDim(ObsLayout::kProprioChair) + (meta_.observe_active ? kNumSubtasks + 1 : 0);
+  const int obs_dim = meta_.obs_dim();
   spec_.name = "meta_sit_chair";
   spec_.obs_dim = obs_dim;
   spec_.act_dim = 3;  // [switch class, theta, dist]
@@ -44,7 +43,12 @@ MetaEnv::MetaEnv(const TaskEnvConfig& config) : config_(config) {
   spec_.act_low = {0.0f, -1e6f, -1e6f};
   spec_.act_high = {classes, 1e6f, 1e6f};
   spec_.obs_slices = {{"more", 0, 6}, {"joints", 6, 42}, {"feet", 48, 2}, {"chair", 50, 7}};
-  if (meta_.observe_active) spec_.obs_slices.push_back({"active", 57, kNumSubtasks + 1});
+  int at = ObsLayoutDim(ObsLayout::kProprioChair);
+  if (meta_.observe_active) {
+    spec_.obs_slices.push_back({"active", at, kNumSubtasks + 1});
+    at += kNumSubtasks + 1;
+  }
+  if (meta_.observe_values) spec_.obs_slices.push_back({"values", at, kNumSubtasks + 1});
   spec_.control_dt = inner.control_dt * meta_.period;
   spec_.max_episode_steps = (inner.max_episode_steps + meta_.period - 1) / meta_.period;
   spec_.has_success = true;
@@ -115,11 +119,21 @@ void MetaEnv::Reset(float* obs) {
 
 void MetaEnv::WriteObservation(float* obs) const {
   env_->WriteObservation(ObsLayout::kProprioChair, obs);
-  if (!meta_.observe_active) return;
   float* extra = obs + ObsLayoutDim(ObsLayout::kProprioChair);
-  for (int id = 0; id < kNumSubtasks; ++id) extra[id] = id == active_ ? 1.0f : 0.0f;
-  const double s = active_steps_ * env_->spec().control_dt / meta_.active_time_scale_s;
-  extra[kNumSubtasks] = static_cast<float>(std::min(s, 2.0));
+  if (meta_.observe_active) {
+    for (int id = 0; id < kNumSubtasks; ++id) extra[id] = id == active_ ? 1.0f : 0.0f;
+    const double s = active_steps_ * env_->spec().control_dt / meta_.active_time_scale_s;
+    extra[kNumSubtasks] = static_cast<float>(std::min(s, 2.0));
+    extra += kNumSubtasks + 1;
+  }
+  if (meta_.observe_values) {
+    // Before the subtasks arrive (a probe's reset) there is nothing to rate: zeros.
+    const bool have = policies_ != nullptr;
+    for (int id = 0; id < kNumSubtasks; ++id) {
+      extra[id] = have && policies_->has(id) ? policies_->Value(id, *env_) : 0.0f;
+    }
+    extra[kNumSubtasks] = have && begun_ ? policies_->RunningValue(active_, *env_) : 0.0f;
+  }
 }
 
 StepResult MetaEnv::Step(const float* action, float* obs) {
@@ -151,6 +165,7 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
       begun_ = true;
       active_steps_ = 0;
       episode_.sequence.push_back(sub);
+      episode_.begin_value.push_back(policies_->Value(sub, *env_));
     }
     task_->set_active(sub);
     policies_->Act(sub, *env_, rng_, !meta_.subtask_stochastic, action_.data());
@@ -188,6 +203,20 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
   episode_.fell = term;
   WriteObservation(obs);
   return out;
+}
+
+float MetaEnv::SubtaskValue(int id) const {
+  if (policies_ == nullptr) {
+    throw std::logic_error("meta env: SubtaskValue before the frozen subtask policies were set");
+  }
+  return policies_->Value(id, *env_);
+}
+
+float MetaEnv::ActiveValue() const {
+  if (policies_ == nullptr) {
+    throw std::logic_error("meta env: ActiveValue before the frozen subtask policies were set");
+  }
+  return policies_->RunningValue(active_, *env_);
 }
 
 std::vector<FrozenPolicyData> LoadFrozenPolicies(const TaskEnvConfig& config) {

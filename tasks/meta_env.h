@@ -26,9 +26,12 @@ namespace perch {
 // What happened in the current (or last) episode, for evaluation.
 struct MetaEpisode {
   std::vector<int> sequence;  // SubtaskId of each run of one subtask, in order
-  double min_dist_m = 0.0;    // minimum pelvis - seat target distance [m]
-  int success_step = -1;      // control step at which 3 s of seated contact completed
-  bool fell = false;          // early termination
+  // [run] that subtask's own critic when it began (SubtaskPolicies::Value; the walker's with the
+  // target its meta step set).
+  std::vector<float> begin_value;
+  double min_dist_m = 0.0;  // minimum pelvis - seat target distance [m]
+  int success_step = -1;    // control step at which 3 s of seated contact completed
+  bool fell = false;        // early termination
   int control_steps = 0;
   double spawn_theta = 0.0;  // azimuth of the spawn around the zone centre [rad]
   // At success: pelvis horizontal distance to the seat target [m] and root yaw error to the
@@ -56,6 +59,10 @@ class MetaEnv : public Env, public FrozenPolicyEnv {
   const MetaConfig& meta() const { return meta_; }
   const MetaEpisode& episode() const { return episode_; }
   int active() const { return active_; }  // SubtaskId acting now
+  // Subtask `id`'s own critic on the current state, as if it began now (SubtaskPolicies::Value).
+  float SubtaskValue(int id) const;
+  // The acting subtask's critic on the current state, on its own clock.
+  float ActiveValue() const;
   // Called after every control step (recordings, filmstrips): the env, its step result and the
   // acting subtask.
   std::function<void(const HumanoidChairEnv&, const StepResult&, int active)> on_control_step;

@@ -1,6 +1,7 @@
 #include "tasks/meta_eval.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <map>
@@ -25,6 +26,7 @@ struct TrialResult {
   double pos_err_m = 0.0, yaw_err_rad = 0.0;
   double spawn_theta = 0.0;
   std::vector<int> sequence;
+  std::vector<float> begin_value;  // [run] the subtask's critic when it began
 };
 
 uint64_t TrialSeed(uint64_t seed, int trial) {
@@ -74,10 +76,80 @@ TrialResult RunTrial(MetaEnv& env, PolicyRunner* runner, MetaPlanner* planner,
   out.yaw_err_rad = e.seated_yaw_err_rad;
   out.spawn_theta = e.spawn_theta;
   out.sequence = e.sequence;
+  out.begin_value = e.begin_value;
+  return out;
+}
+
+// How well a subtask's own critic at its start tells the runs that went on from those that
+// failed: per subtask, the runs, their share that went on (a turn or walk: not ended by a fall;
+// sit: the trial succeeded with it), the mean value of each group, the AUC (the chance that a run
+// that went on started with a higher value than one that failed; 0.5: no information) and the
+// share that went on per value quartile (cut points in `quartile_cuts`).
+Json HandoverValues(const std::vector<TrialResult>& results) {
+  std::array<std::vector<std::pair<float, bool>>, kNumSubtasks> runs;
+  for (const TrialResult& r : results) {
+    for (size_t j = 0; j < r.sequence.size() && j < r.begin_value.size(); ++j) {
+      const bool last = j + 1 == r.sequence.size();
+      const int id = r.sequence[j];
+      const bool ok = id == kSit ? (last && r.success) : !(last && r.fell);
+      runs[id].push_back({r.begin_value[j], ok});
+    }
+  }
+  Json out = Json::object();
+  for (int id = 0; id < kNumSubtasks; ++id) {
+    std::vector<std::pair<float, bool>>& v = runs[id];
+    if (v.empty()) continue;
+    std::sort(v.begin(), v.end());  // for the quartiles
+    double sum_ok = 0.0, sum_bad = 0.0;
+    int n_ok = 0;
+    for (const auto& [value, ok] : v) {
+      (ok ? sum_ok : sum_bad) += value;
+      n_ok += ok;
+    }
+    const int n = static_cast<int>(v.size()), n_bad = n - n_ok;
+    Json quart = Json::array(), cuts = Json::array();
+    for (int q = 0; q < 4; ++q) {
+      const size_t lo = v.size() * q / 4, hi = v.size() * (q + 1) / 4;
+      int ok = 0;
+      for (size_t m = lo; m < hi; ++m) ok += v[m].second;
+      quart.push_back(hi > lo ? static_cast<double>(ok) / (hi - lo) : 0.0);
+      if (q > 0) cuts.push_back(v[lo].first);
+    }
+    Json j{{"runs", n},
+           {"went_on_rate", static_cast<double>(n_ok) / n},
+           {"value_mean_went_on", n_ok ? sum_ok / n_ok : 0.0},
+           {"value_mean_failed", n_bad ? sum_bad / n_bad : 0.0},
+           {"quartile_cuts", cuts},
+           {"went_on_by_quartile", quart}};
+    j["auc"] = RankAuc(v);
+    out[SubtaskName(id)] = j;
+  }
   return out;
 }
 
 }  // namespace
+
+double RankAuc(std::vector<std::pair<float, bool>> v) {
+  std::sort(v.begin(), v.end());
+  // Mann-Whitney: the positives' rank sum (ties share their mean rank).
+  double rank_sum = 0.0;
+  int64_t n_pos = 0;
+  for (size_t i = 0; i < v.size();) {
+    size_t k = i;
+    while (k < v.size() && v[k].first == v[i].first) ++k;
+    const double mean_rank = 0.5 * static_cast<double>(i + 1 + k);
+    for (size_t m = i; m < k; ++m) {
+      if (v[m].second) {
+        rank_sum += mean_rank;
+        ++n_pos;
+      }
+    }
+    i = k;
+  }
+  const int64_t n_neg = static_cast<int64_t>(v.size()) - n_pos;
+  if (n_pos == 0 || n_neg == 0) return 0.5;
+  return (rank_sum - 0.5 * n_pos * (n_pos + 1.0)) / (static_cast<double>(n_pos) * n_neg);
+}
 
 Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& meta,
                   const std::vector<FrozenPolicyData>& frozen, const MetaEvalOptions& o,
@@ -89,7 +161,7 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
   const PolicyConfig pc =
       planned ? PolicyConfig::Meta() : PolicyConfigFromShape(meta.shape(), "meta model");
   const MetaConfig& mc = config.Section<SitChairTaskConfig>().meta;
-  const int obs_dim = 57 + (mc.observe_active ? kNumSubtasks + 1 : 0);
+  const int obs_dim = mc.obs_dim();
   if (!planned && (pc.kind != PolicyKind::kMeta || pc.obs_dim != obs_dim ||
                    pc.num_choices != static_cast<int>(mc.choices.size()))) {
     throw ConfigError("eval: the model is not a meta policy over this config's " +
@@ -203,6 +275,7 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
          {"sequences", top},
          {"choices", config.Section<SitChairTaskConfig>().meta.choices},
          {"decider", planned ? "planner" : "meta policy"}};
+  j["handover_values"] = HandoverValues(results);
   if (planned) j["planner"] = o.planner->ToJson();
 
   // Filmstrip material: the first success and the first failure, replayed (trials are

@@ -8,6 +8,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "common/env.h"
@@ -48,6 +49,10 @@ Json EvaluateMeta(const TaskEnvConfig& config, const proto::ModelWeights& meta,
                   const std::vector<FrozenPolicyData>& frozen, const MetaEvalOptions& options,
                   MetaTrialFrames* first_success = nullptr,
                   MetaTrialFrames* first_failure = nullptr);
+
+// The chance that a positive (second = true) scores higher than a negative, ties counted half
+// (the area under the ROC curve); 0.5 when either group is empty.
+double RankAuc(std::vector<std::pair<float, bool>> scored);
 
 // Fig. 7: the `transitions` of an EvaluateMeta result as a PNG, one matrix per start side; rows
 // are where a run of one subtask came from (start or a subtask), columns what followed (a subtask

@@ -45,6 +45,15 @@ void MetaPlanner::Reset() {
   side_ = -1;
   last_active_ = -1;
   active_since_step_ = 0;
+  ready_since_step_ = -1;
+}
+
+bool MetaPlanner::Gate(const MetaEnv& env, int next, double value_min) {
+  if (value_min <= 0.0) return true;
+  const int step = env.humanoid().episode_step();
+  if (ready_since_step_ < 0) ready_since_step_ = step;
+  const double waited = (step - ready_since_step_) * env.humanoid().spec().control_dt;
+  return waited >= plan_->config.value_wait_s || env.SubtaskValue(next) >= value_min;
 }
 
 void MetaPlanner::Act(const MetaEnv& env, float* action) {
@@ -65,6 +74,7 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
     // It began at the start of the last meta step (or at the reset).
     active_since_step_ = std::max(0, h.episode_step() - (last_active_ < 0 ? 0 : env.meta().period));
     last_active_ = want;
+    ready_since_step_ = -1;
   }
   // Turns and sit ignore the target; keep it ahead so a later walk starts sensibly.
   Eigen::Vector2d target =
@@ -79,15 +89,41 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
         WalkAroundChair(root.xy, v.start_point, h.SeatTargetWorld().head<2>(), p.sit_start.yaw,
                         c.clearance_m, c.avoid_front_m);
     target = around == v.start_point ? v.walk_target : around;
-    if (HandOverNow(v, h.humanoid_state().root_lin_vel.head<2>(), period_s, p.sit_start.xy, rule)) {
-      want = side_ == 0 ? kLeftTurn : kRightTurn;
+    const int turn = side_ == 0 ? kLeftTurn : kRightTurn;
+    if (HandOverNow(v, h.humanoid_state().root_lin_vel.head<2>(), period_s, p.sit_start.xy, rule) &&
+        Gate(env, turn, c.turn_value_min) &&
+        // A turn that would be handed back at once is not begun.
+        (c.turn_abort_value <= 0 || env.SubtaskValue(turn) >= c.turn_abort_value)) {
+      want = turn;
     }
   } else if (want == kLeftTurn || want == kRightTurn) {
     const double t = (h.episode_step() - active_since_step_) * dt;
-    if (t >= c.turn_max_s ||
-        (t >= c.turn_min_s && SitNow(root.yaw, h.humanoid_state().root_ang_vel.z(), p.sit_start.yaw,
-                                     rule.tolerance_rad, period_s))) {
+    // A turn its own critic gives up on goes back to the walker (before it falls), which plans
+    // the turn again at the next decision.
+    bool abort = false;
+    if (c.turn_abort_value > 0) {
+      const float v = env.ActiveValue();
+      const float w = env.SubtaskValue(kWalk);
+      abort = v < c.turn_abort_value && w > v && w >= c.abort_walk_min;
+    }
+    // The sit as soon as its critic rates the state highly, within a wider heading window.
+    const bool early =
+        c.sit_value_early > 0 && t >= c.turn_min_s &&
+        std::abs(AngleDiff(root.yaw, p.sit_start.yaw)) <= c.sit_value_yaw_deg * M_PI / 180.0 &&
+        env.SubtaskValue(kSit) >= c.sit_value_early;
+    if (abort) {
+      want = kWalk;
+    } else if (t >= c.turn_max_s || early ||
+               (t >= c.turn_min_s &&
+                SitNow(root.yaw, h.humanoid_state().root_ang_vel.z(), p.sit_start.yaw,
+                       rule.tolerance_rad, period_s) &&
+                Gate(env, kSit, c.sit_value_min))) {
       want = kSit;
+      if (c.sit_retry_value > 0) {
+        const float v = env.SubtaskValue(kSit);
+        const float w = env.SubtaskValue(kWalk);
+        if (v < c.sit_retry_value && w > v && w >= c.abort_walk_min) want = kWalk;
+      }
     }
   }
   const std::vector<std::string>& choices = env.meta().choices;

@@ -39,6 +39,12 @@ class MetaPlanner {
   // it: a cloned policy may drive while the planner labels, tasks/meta_clone.h).
   int last_active_ = -1;
   int active_since_step_ = 0;
+  // The value gate (PlannerConfig::turn_value_min): the control step at which the rule first
+  // said "hand over" during the running subtask; -1: not yet.
+  int ready_since_step_ = -1;
+  // Whether the hand-over to `next` may happen now: its critic rates the state at least
+  // value_min, or the wait is over (value_min 0: always).
+  bool Gate(const MetaEnv& env, int next, double value_min);
 };
 
 }  // namespace perch

@@ -149,7 +149,9 @@ TEST(ChainPlan, PlannerConfigIsStrictAndNamesTheField) {
   EXPECT_EQ(c.ToJson(), PlannerConfig().ToJson());
   for (const Json& bad : {Json{{"pass", 0.3}}, Json{{"side", "up"}}, Json{{"reach_m", 2.0}},
                           Json{{"aim_m", {3.0, 0.0}}}, Json{{"pass_m", "x"}},
-                          Json{{"avoid_front_m", 5.0}}}) {
+                          Json{{"avoid_front_m", 5.0}}, Json{{"turn_value_min", -1.0}},
+                          Json{{"sit_value_early", -0.5}}, Json{{"sit_value_yaw_deg", 0.0}},
+                          Json{{"turn_abort_value", -1.0}}, Json{{"value_wait_s", 5.0}}}) {
     try {
       PlannerConfig::FromJson(bad, "sit_chair.meta.planner");
       ADD_FAILURE() << "accepted " << bad.dump();
@@ -236,6 +238,25 @@ TEST(ChainPlan, PlanOfTheDeliveredSubtasks) {
     EXPECT_EQ(seq.rfind("walk", 0), 0u) << seq;
     EXPECT_EQ(seq.find("sit>"), std::string::npos) << seq;  // sit is never left
   }
+  // Every run's start is rated by its subtask's critic: one walk per trial, and the sits that
+  // went on (succeeded) started from states their critic rated higher than those that failed.
+  const Json& hv = j["handover_values"];
+  EXPECT_EQ(hv["walk"]["runs"].get<int>(), 40);
+  ASSERT_TRUE(hv.contains("sit"));
+  const Json& sit = hv["sit"];
+  if (sit["went_on_rate"].get<double>() > 0 && sit["went_on_rate"].get<double>() < 1) {
+    EXPECT_GT(sit["value_mean_went_on"].get<double>(), sit["value_mean_failed"].get<double>());
+    EXPECT_GT(sit["auc"].get<double>(), 0.5);
+  }
+
+  // The critics' rules (ours): a turn its critic rates below turn_abort_value is never begun, so
+  // with an unreachable threshold the planner only walks.
+  MetaPlan no_turn = plan;
+  no_turn.config.turn_abort_value = 1e3;
+  o.trials = 3;
+  o.planner = std::make_shared<const MetaPlan>(no_turn);
+  const Json walked = EvaluateMeta(c, proto::ModelWeights(), frozen, o);
+  for (const Json& s : walked["sequences"]) EXPECT_EQ(s["sequence"], "walk");
 }
 
 TEST(ChainPlan, ThePlannedChainRecordsWhereEachSitBegan) {
@@ -322,7 +343,7 @@ TEST(MetaClone, AStageStartsFromThePreviousStagesPolicy) {
 
   CloneOptions stage = o;
   stage.init = first.weights;
-  stage.dagger_beta = 0.0;     // the previous stage acts alone; the planner only labels
+  stage.dagger_beta = 0.0;      // the previous stage acts alone; the planner only labels
   stage.learning_rate = 1e-7f;  // so that the fit barely moves the weights
   stage.epochs = 1;
   const CloneResult next = CloneMeta(c, frozen, pc, NormalizerConfig(), plan, stage);
@@ -334,7 +355,8 @@ TEST(MetaClone, AStageStartsFromThePreviousStagesPolicy) {
   fresh.init.reset();
   const CloneResult scratch = CloneMeta(c, frozen, pc, NormalizerConfig(), plan, fresh);
   for (int i = 0; i < first.weights.params_size(); ++i) {
-    max_diff = std::max(max_diff, std::abs(double(next.weights.params(i)) - first.weights.params(i)));
+    max_diff =
+        std::max(max_diff, std::abs(double(next.weights.params(i)) - first.weights.params(i)));
     max_fresh =
         std::max(max_fresh, std::abs(double(scratch.weights.params(i)) - first.weights.params(i)));
   }

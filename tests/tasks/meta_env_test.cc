@@ -236,6 +236,68 @@ TEST(MetaEnv, SameSeedSameEpisode) {
 
 // Trials are seeded by index: the same numbers whatever the thread count; the keys the issue
 // names are there; the transition counts add up to the trials.
+TEST(MetaEnv, RecordsEachSubtasksCriticWhereItBegan) {
+  MetaEnv env(MetaConfigFor({"turn_left", "turn_right", "sit", "walk"}));
+  env.SetFrozenPolicies(Untrained());
+  std::vector<float> obs(57), left{0.0f, 0.0f, 1.0f}, sit{2.0f, 0.0f, 1.0f};
+  env.Seed(7);
+  env.Reset(obs.data());
+  const float v_left = env.SubtaskValue(kLeftTurn);
+  const float v_sit_now = env.SubtaskValue(kSit);
+  EXPECT_NE(v_left, v_sit_now);  // each subtask's own critic
+  env.Step(left.data(), obs.data());
+  ASSERT_EQ(env.episode().begin_value.size(), 1u);
+  EXPECT_EQ(env.episode().begin_value[0], v_left);
+  EXPECT_EQ(env.ActiveValue(), env.SubtaskValue(kLeftTurn));  // a turn without a clock: the same
+  // The next subtask is rated on the state it starts from, not the reset's.
+  const float v_sit = env.SubtaskValue(kSit);
+  EXPECT_NE(v_sit, v_sit_now);
+  env.Step(sit.data(), obs.data());
+  ASSERT_EQ(env.episode().sequence, (std::vector<int>{kLeftTurn, kSit}));
+  EXPECT_EQ(env.episode().begin_value[1], v_sit);
+  // Keeping the same subtask is not a new run.
+  env.Step(sit.data(), obs.data());
+  EXPECT_EQ(env.episode().begin_value.size(), 2u);
+}
+
+TEST(MetaEnv, ObserveValuesAppendsEverySubtasksCriticAndTheActingOnes) {
+  TaskEnvConfig c = MetaConfigFor({"turn_left", "sit", "walk"});
+  c.MutableSection<SitChairTaskConfig>().meta.observe_active = true;
+  c.MutableSection<SitChairTaskConfig>().meta.observe_values = true;
+  MetaEnv env(c);
+  ASSERT_EQ(env.spec().obs_dim, 67);
+  ASSERT_EQ(env.spec().obs_slices.back().name, "values");
+  EXPECT_EQ(env.spec().obs_slices.back().offset, 62);
+  env.SetFrozenPolicies(Untrained());
+  std::vector<float> obs(67), left{0.0f, 0.0f, 1.0f};
+  env.Seed(9);
+  env.Reset(obs.data());
+  EXPECT_EQ(obs[62 + kLeftTurn], env.SubtaskValue(kLeftTurn));
+  EXPECT_EQ(obs[62 + kSit], env.SubtaskValue(kSit));
+  EXPECT_EQ(obs[62 + kWalk], env.SubtaskValue(kWalk));
+  EXPECT_EQ(obs[62 + kRightTurn], 0.0f);  // not among the choices: nothing to rate
+  EXPECT_EQ(obs[66], 0.0f);               // nothing acts yet
+  env.Step(left.data(), obs.data());
+  EXPECT_EQ(obs[62 + kSit], env.SubtaskValue(kSit));
+  EXPECT_EQ(obs[66], env.ActiveValue());
+  EXPECT_NE(obs[66], 0.0f);
+  // A config without it keeps the paper's 57 inputs (+5 with observe_active only).
+  c.MutableSection<SitChairTaskConfig>().meta.observe_values = false;
+  EXPECT_EQ(MetaEnv(c).spec().obs_dim, 62);
+}
+
+TEST(MetaEval, RankAucCountsPairsAndTiesHalf) {
+  EXPECT_DOUBLE_EQ(RankAuc({{1, false}, {2, false}, {3, true}, {4, true}}), 1.0);
+  EXPECT_DOUBLE_EQ(RankAuc({{1, true}, {2, true}, {3, false}}), 0.0);
+  EXPECT_DOUBLE_EQ(RankAuc({{1, true}, {1, false}}), 0.5);
+  // Positives 1 and 3, negative 2: one of the two pairs is ordered.
+  EXPECT_DOUBLE_EQ(RankAuc({{3, true}, {2, false}, {1, true}}), 0.5);
+  // Positives 2, 2; negatives 1, 2: pairs (2>1) x2 = 2, ties (2=2) x2 = 1 -> 3 / 4.
+  EXPECT_DOUBLE_EQ(RankAuc({{2, true}, {2, true}, {1, false}, {2, false}}), 0.75);
+  EXPECT_DOUBLE_EQ(RankAuc({{1, true}}), 0.5);  // no negatives
+  EXPECT_DOUBLE_EQ(RankAuc({}), 0.5);
+}
+
 TEST(MetaEval, DeterministicOverThreadsAndCountsEveryTrial) {
   const TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"});
   PpoLearner l(PolicyConfig::Meta(57), PpoConfig::Meta(), 4);
@@ -255,7 +317,7 @@ TEST(MetaEval, DeterministicOverThreadsAndCountsEveryTrial) {
   o.progress = nullptr;
   Json three = EvaluateMeta(c, meta, Untrained(), o);
   for (const char* k : {"success_rate", "min_dist_mean_m", "min_dist_std_m", "fall_rate",
-                        "transitions", "sequences", "by_side"}) {
+                        "transitions", "sequences", "by_side", "handover_values"}) {
     ASSERT_TRUE(one.contains(k)) << k;
     EXPECT_EQ(one[k], three[k]) << k;
   }
