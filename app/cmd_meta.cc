@@ -43,6 +43,11 @@ void RegisterMetaCommands(CLI::App& root, CLI::App& /*bench*/) {
       ->check(CLI::Range(1, 1000000));
   cmd->add_option("--rounds", o->clone.rounds, "rounds (> 1: DAgger rounds after the first)")
       ->check(CLI::Range(1, 100));
+  cmd->add_option("--switch-weight", o->clone.switch_weight,
+                  "weight of the meta steps whose label hands over to another subtask, against 1 "
+                  "for the others")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 1000.0));
   cmd->add_option("--beta", o->clone.dagger_beta,
                   "DAgger rounds: the planner acts with this probability per meta step")
       ->check(CLI::Range(0.0, 1.0));

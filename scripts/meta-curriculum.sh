@@ -12,7 +12,7 @@
 #
 #   scripts/meta-curriculum.sh               # all stages, then the evaluations
 #   TRIALS=1000 ROUNDS=3 scripts/meta-curriculum.sh
-#   PLAN=plan3 OUT=models/sit_chair/critic OURS_ONLY=1 scripts/meta-curriculum.sh
+#   PLAN=plan3 OUT=models/sit_chair/critic OURS_ONLY=1 SWITCH_WEIGHT=10 scripts/meta-curriculum.sh
 #     # the planner with the subtasks' critics (configs/meta_*_plan3_30hz.json), only the stages
 #     # that keep the earlier zones
 set -euo pipefail
@@ -21,6 +21,7 @@ PERCH=${PERCH:-build/app/perch}
 OUT=${OUT:-models/sit_chair}  # the stage configs' cluster.init_from point here
 PLAN=${PLAN:-plan2}            # configs/meta_*_${PLAN}_30hz.json
 OURS_ONLY=${OURS_ONLY:-0}      # 1: skip the paper's curriculum and Table 6's w/o-CL stages
+SWITCH_WEIGHT=${SWITCH_WEIGHT:-1}  # meta-clone --switch-weight: the hand-overs' weight in the fit
 EPISODES=${EPISODES:-300}
 ROUNDS=${ROUNDS:-3}
 ZONE1_ROUNDS=${ZONE1_ROUNDS:-5}
@@ -38,7 +39,7 @@ stage() {  # config output rounds [meta-clone flags]
   fi
   echo "meta-curriculum: $out from $cfg $*"
   "$PERCH" meta-clone --config "$cfg" --out "$out" --episodes "$EPISODES" --rounds "$rounds" \
-    --epochs "$EPOCHS" "$@" >/dev/null
+    --epochs "$EPOCHS" --switch-weight "$SWITCH_WEIGHT" "$@" >/dev/null
 }
 
 evaluate() {  # model zone

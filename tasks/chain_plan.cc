@@ -45,7 +45,9 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
                   "sit_value_yaw_deg",
                   "turn_abort_value",
                   "sit_retry_value",
-                  "abort_walk_min"},
+                  "abort_walk_min",
+                  "turn_begin_value",
+                  "abort_recover_s"},
                  ctx);
   PlannerConfig c;
   GetOptional(j, "pass_m", c.pass_m, ctx);
@@ -70,6 +72,12 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "turn_abort_value", c.turn_abort_value, ctx);
   GetOptional(j, "sit_retry_value", c.sit_retry_value, ctx);
   GetOptional(j, "abort_walk_min", c.abort_walk_min, ctx);
+  c.turn_begin_value = c.turn_abort_value;
+  GetOptional(j, "turn_begin_value", c.turn_begin_value, ctx);
+  GetOptional(j, "abort_recover_s", c.abort_recover_s, ctx);
+  if (!(c.abort_recover_s >= 0 && c.abort_recover_s <= 5)) {
+    throw ConfigError(ctx + ".abort_recover_s: must be in [0, 5] s");
+  }
   if (!(c.sit_retry_value >= 0)) {
     throw ConfigError(ctx + ".sit_retry_value: must be >= 0 (0: off)");
   }
@@ -143,7 +151,9 @@ Json PlannerConfig::ToJson() const {
               {"sit_value_yaw_deg", sit_value_yaw_deg},
               {"turn_abort_value", turn_abort_value},
               {"sit_retry_value", sit_retry_value},
-              {"abort_walk_min", abort_walk_min}};
+              {"abort_walk_min", abort_walk_min},
+              {"turn_begin_value", turn_begin_value},
+              {"abort_recover_s", abort_recover_s}};
 }
 
 Eigen::Vector2d TurnCalibration::DisplacementAt(double rotation) const {

@@ -125,6 +125,12 @@ struct PlannerConfig {
   // Both hand-backs to the walker also need the walker's critic at least this high (it falls
   // after many of them otherwise). 0: no bound beyond "higher than the subtask's".
   double abort_walk_min = 0.0;
+  // A turn is begun only from a state its critic rates at least this (so that it is not handed
+  // back at once); defaults to turn_abort_value when that is given. 0: off.
+  double turn_begin_value = 0.0;
+  // After a hand-back, the walker walks straight on for this long before the turn is planned
+  // again [s]. 0: plans at once.
+  double abort_recover_s = 0.0;
 
   static PlannerConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;

@@ -21,6 +21,7 @@ namespace {
 // What one episode adds: observations [obs_dim] and the planner's labels [3] per meta step.
 struct Episode {
   std::vector<float> obs, labels;
+  std::vector<uint8_t> changes;  // [step] the label's subtask is not the acting one
   int steps = 0;
   bool success = false;
 };
@@ -40,6 +41,10 @@ Episode Collect(MetaEnv& env, MetaPlanner& planner, PolicyRunner* runner, double
     planner.Act(env, label.data());
     e.obs.insert(e.obs.end(), obs.begin(), obs.end());
     e.labels.insert(e.labels.end(), label.begin(), label.end());
+    const std::vector<int> ids = env.meta().choice_ids();
+    const int cls =
+        std::clamp(static_cast<int>(std::lround(label[0])), 0, static_cast<int>(ids.size()) - 1);
+    e.changes.push_back(ids[cls] != env.active());
     ++e.steps;
     const bool expert = runner == nullptr || rng.Uniform(0.0, 1.0) < beta;
     if (expert) {
@@ -74,6 +79,9 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
   if (o.episodes < 1 || o.rounds < 1 || o.epochs < 1 || o.minibatch < 1) {
     throw ConfigError("meta-clone: episodes, rounds, epochs and minibatch must be >= 1");
   }
+  if (!(o.switch_weight >= 1 && o.switch_weight <= 1000)) {
+    throw ConfigError("meta-clone: switch weight must be in [1, 1000]");
+  }
   if (!(o.dagger_beta >= 0 && o.dagger_beta <= 1)) {
     throw ConfigError("meta-clone: dagger beta must be in [0, 1]");
   }
@@ -85,6 +93,7 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
   RunningMeanStd stats(pc.obs_dim, norm.initial_count);
   Adam adam(model.num_params(), 0.9f, 0.999f, 1e-5f);
   std::vector<float> all_obs, all_labels;
+  std::vector<uint8_t> all_changes;
   Json rounds = Json::array();
   proto::ModelWeights weights;
   auto export_weights = [&]() {
@@ -138,6 +147,7 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
     for (const Episode& e : eps) {
       all_obs.insert(all_obs.end(), e.obs.begin(), e.obs.end());
       all_labels.insert(all_labels.end(), e.labels.begin(), e.labels.end());
+      all_changes.insert(all_changes.end(), e.changes.begin(), e.changes.end());
       successes += e.success;
       steps += e.steps;
     }
@@ -174,15 +184,17 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
       for (int start = 0; start < n; start += o.minibatch) {
         const int b = std::min(o.minibatch, n - start);
         MatrixXf xb(pc.obs_dim, b), ab(3, b);
+        VectorXf w(b);
         for (int k = 0; k < b; ++k) {
           xb.col(k) = x.col(order[start + k]);
           ab.col(k) = a.col(order[start + k]);
+          w[k] = all_changes[order[start + k]] ? static_cast<float>(o.switch_weight) : 1.0f;
         }
         model.Evaluate(model.params().data(), xb, ab, &cache);
         nll -= cache.log_prob.sum();
         grad.setZero();
-        // Ascend the mean log-likelihood: Adam descends -grad.
-        const VectorXf dlogp = VectorXf::Constant(b, -1.0f / b);
+        // Ascend the weighted mean log-likelihood: Adam descends -grad.
+        const VectorXf dlogp = -w / w.sum();
         model.Backward(model.params().data(), dlogp, VectorXf::Zero(b), VectorXf::Zero(b), &cache,
                        grad.data());
         grad.array() *= model.trainable_mask().array();
@@ -204,12 +216,15 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
     runner.set_update_obs_stats(false);
     Rng unused(0);
     std::vector<float> act(3);
-    int right = 0, walk_n = 0;
+    int right = 0, walk_n = 0, changes = 0, changes_right = 0;
     std::vector<double> target_err;
     for (int i = 0; i < n; ++i) {
       runner.Act(all_obs.data() + static_cast<size_t>(i) * pc.obs_dim, unused, true, nullptr,
                  act.data());
-      right += static_cast<int>(std::lround(act[0])) == static_cast<int>(a(0, i));
+      const bool ok = static_cast<int>(std::lround(act[0])) == static_cast<int>(a(0, i));
+      right += ok;
+      changes += all_changes[i];
+      changes_right += all_changes[i] && ok;
       if (static_cast<int>(a(0, i)) == pc.target_choice) {
         ++walk_n;
         const double ex = a(2, i) * std::cos(a(1, i)), ey = a(2, i) * std::sin(a(1, i));
@@ -218,20 +233,26 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
       }
     }
     const double acc = static_cast<double>(right) / n;
-    rounds.push_back({{"round", round + 1},
-                      {"episodes", o.episodes},
-                      {"planner_acts_prob", beta},
-                      {"success_rate", static_cast<double>(successes) / o.episodes},
-                      {"meta_steps", steps},
-                      {"samples_total", n},
-                      {"nll_last_epoch", last_nll},
-                      {"switch_accuracy", acc},
-                      {"walk_target_err_m_mean", MeanOf(target_err)},
-                      {"walk_samples", walk_n}});
+    rounds.push_back(
+        {{"round", round + 1},
+         {"episodes", o.episodes},
+         {"planner_acts_prob", beta},
+         {"success_rate", static_cast<double>(successes) / o.episodes},
+         {"meta_steps", steps},
+         {"samples_total", n},
+         {"nll_last_epoch", last_nll},
+         {"switch_accuracy", acc},
+         {"handover_samples", changes},
+         {"handover_accuracy", changes ? static_cast<double>(changes_right) / changes : 0.0},
+         {"walk_target_err_m_mean", MeanOf(target_err)},
+         {"walk_samples", walk_n}});
     if (o.progress) {
       o.progress("meta-clone: round " + std::to_string(round + 1) + " fitted: switch accuracy " +
-                 std::to_string(acc) + ", walk target error " + std::to_string(MeanOf(target_err)) +
-                 " m (mean over " + std::to_string(walk_n) + ")");
+                 std::to_string(acc) + " (hand-overs " +
+                 std::to_string(changes ? static_cast<double>(changes_right) / changes : 0.0) +
+                 " of " + std::to_string(changes) + "), walk target error " +
+                 std::to_string(MeanOf(target_err)) + " m (mean over " + std::to_string(walk_n) +
+                 ")");
     }
   }
   CloneResult r;
@@ -242,6 +263,7 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
                    {"learning_rate", o.learning_rate},
                    {"target_log_std", o.target_log_std},
                    {"dagger_beta", o.dagger_beta},
+                   {"switch_weight", o.switch_weight},
                    {"init_from_stage", o.init.has_value()},
                    {"seed", o.seed},
                    {"planner", plan->ToJson()}};

@@ -31,7 +31,11 @@ struct CloneOptions {
   int episodes = 300;        // per round
   int rounds = 1;            // 1: plain cloning; > 1: DAgger rounds after the first
   double dagger_beta = 0.5;  // later rounds: the planner acts with this probability per step
-  int epochs = 40;           // passes over the data per round
+  // Weight in the fit of the meta steps whose label changes the acting subtask (a hand-over),
+  // against 1 for the others (ours, 2026-12-05): they are 1-2% of the steps at 30 Hz, yet each
+  // decides a trial.
+  double switch_weight = 1.0;
+  int epochs = 40;  // passes over the data per round
   int minibatch = 256;
   float learning_rate = 1e-3f;
   // The target head's log-std after fitting [log m / log rad]: PPO's exploration (the fit

@@ -218,6 +218,7 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
   // Transition counts per start side (the chair faces +x: theta > 0 is its left, +y).
   std::map<std::string, std::map<std::string, std::map<std::string, int>>> trans;
   std::map<std::string, int> seq_count;
+  std::map<std::string, std::array<int, 2>> seq_ends;  // sequence -> {successes, falls}
   std::map<std::string, std::array<int, 2>> side_success;  // side -> {successes, trials}
   for (const TrialResult& r : results) {
     n_success += r.success;
@@ -239,6 +240,8 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
     }
     trans[side][prev]["end"] += 1;
     seq_count[seq] += 1;
+    seq_ends[seq][0] += r.success;
+    seq_ends[seq][1] += r.fell;
   }
   const double n = o.trials;
   const auto ci = WilsonInterval95(n_success, o.trials);
@@ -249,7 +252,11 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
   });
   Json top = Json::array();
   for (size_t i = 0; i < seqs.size() && i < 10; ++i) {
-    top.push_back({{"sequence", seqs[i].second}, {"trials", seqs[i].first}});
+    const std::array<int, 2>& ends = seq_ends[seqs[i].second];
+    top.push_back({{"sequence", seqs[i].second},
+                   {"trials", seqs[i].first},
+                   {"successes", ends[0]},
+                   {"falls", ends[1]}});
   }
   Json sides = Json::object();
   for (const auto& [side, c] : side_success) {

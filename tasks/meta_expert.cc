@@ -46,6 +46,7 @@ void MetaPlanner::Reset() {
   last_active_ = -1;
   active_since_step_ = 0;
   ready_since_step_ = -1;
+  recover_until_step_ = 0;
 }
 
 bool MetaPlanner::Gate(const MetaEnv& env, int next, double value_min) {
@@ -89,11 +90,15 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
         WalkAroundChair(root.xy, v.start_point, h.SeatTargetWorld().head<2>(), p.sit_start.yaw,
                         c.clearance_m, c.avoid_front_m);
     target = around == v.start_point ? v.walk_target : around;
+    if (h.episode_step() < recover_until_step_) {
+      target = root.xy + c.lookahead_m * Eigen::Vector2d(std::cos(root.yaw), std::sin(root.yaw));
+    }
     const int turn = side_ == 0 ? kLeftTurn : kRightTurn;
     if (HandOverNow(v, h.humanoid_state().root_lin_vel.head<2>(), period_s, p.sit_start.xy, rule) &&
         Gate(env, turn, c.turn_value_min) &&
         // A turn that would be handed back at once is not begun.
-        (c.turn_abort_value <= 0 || env.SubtaskValue(turn) >= c.turn_abort_value)) {
+        (c.turn_begin_value <= 0 || env.SubtaskValue(turn) >= c.turn_begin_value) &&
+        h.episode_step() >= recover_until_step_) {
       want = turn;
     }
   } else if (want == kLeftTurn || want == kRightTurn) {
@@ -113,6 +118,8 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
         env.SubtaskValue(kSit) >= c.sit_value_early;
     if (abort) {
       want = kWalk;
+      recover_until_step_ =
+          h.episode_step() + static_cast<int>(std::lround(c.abort_recover_s / dt));
     } else if (t >= c.turn_max_s || early ||
                (t >= c.turn_min_s &&
                 SitNow(root.yaw, h.humanoid_state().root_ang_vel.z(), p.sit_start.yaw,
@@ -122,7 +129,11 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
       if (c.sit_retry_value > 0) {
         const float v = env.SubtaskValue(kSit);
         const float w = env.SubtaskValue(kWalk);
-        if (v < c.sit_retry_value && w > v && w >= c.abort_walk_min) want = kWalk;
+        if (v < c.sit_retry_value && w > v && w >= c.abort_walk_min) {
+          want = kWalk;
+          recover_until_step_ =
+              h.episode_step() + static_cast<int>(std::lround(c.abort_recover_s / dt));
+        }
       }
     }
   }

@@ -42,6 +42,8 @@ class MetaPlanner {
   // The value gate (PlannerConfig::turn_value_min): the control step at which the rule first
   // said "hand over" during the running subtask; -1: not yet.
   int ready_since_step_ = -1;
+  // After a turn was handed back: the walker walks straight on until this control step.
+  int recover_until_step_ = 0;
   // Whether the hand-over to `next` may happen now: its critic rates the state at least
   // value_min, or the wait is over (value_min 0: always).
   bool Gate(const MetaEnv& env, int next, double value_min);

@@ -145,13 +145,19 @@ TEST(ChainPlan, SitNowAtTheToleranceOrAtTheClosestDecision) {
 
 TEST(ChainPlan, PlannerConfigIsStrictAndNamesTheField) {
   EXPECT_NO_THROW(PlannerConfig::FromJson(Json::object(), "p"));
+  // A turn is begun only where it would not be handed back at once, unless told otherwise.
+  EXPECT_EQ(PlannerConfig::FromJson(Json{{"turn_abort_value", 3.0}}, "p").turn_begin_value, 3.0);
+  EXPECT_EQ(PlannerConfig::FromJson(Json{{"turn_abort_value", 3.0}, {"turn_begin_value", 0.0}}, "p")
+                .turn_begin_value,
+            0.0);
   const PlannerConfig c = PlannerConfig::FromJson(PlannerConfig().ToJson(), "p");
   EXPECT_EQ(c.ToJson(), PlannerConfig().ToJson());
   for (const Json& bad : {Json{{"pass", 0.3}}, Json{{"side", "up"}}, Json{{"reach_m", 2.0}},
                           Json{{"aim_m", {3.0, 0.0}}}, Json{{"pass_m", "x"}},
                           Json{{"avoid_front_m", 5.0}}, Json{{"turn_value_min", -1.0}},
                           Json{{"sit_value_early", -0.5}}, Json{{"sit_value_yaw_deg", 0.0}},
-                          Json{{"turn_abort_value", -1.0}}, Json{{"value_wait_s", 5.0}}}) {
+                          Json{{"turn_abort_value", -1.0}}, Json{{"value_wait_s", 5.0}},
+                          Json{{"abort_recover_s", -1.0}}, Json{{"sit_retry_value", -1.0}}}) {
     try {
       PlannerConfig::FromJson(bad, "sit_chair.meta.planner");
       ADD_FAILURE() << "accepted " << bad.dump();
@@ -323,6 +329,21 @@ TEST(MetaClone, ClonesThePlannersChoicesAndDaggerAddsTheClonesStates) {
   // Same seed, same clone.
   EXPECT_EQ(CloneMeta(c, frozen, pc, NormalizerConfig(), plan, o).weights.SerializeAsString(),
             r.weights.SerializeAsString());
+  // Hand-overs (labels that change the acting subtask) are few: every episode has at least the
+  // walk -> turn one. Weighting them fits them at least as well, and changes the clone.
+  const int handovers = rounds[0]["handover_samples"].get<int>();
+  EXPECT_GE(handovers, o.episodes);
+  EXPECT_LT(handovers, rounds[0]["samples_total"].get<int>() / 2);
+  CloneOptions weighted = o;
+  weighted.switch_weight = 20;
+  const CloneResult w = CloneMeta(c, frozen, pc, NormalizerConfig(), plan, weighted);
+  EXPECT_EQ(w.summary["rounds"][0]["handover_samples"].get<int>(), handovers);
+  EXPECT_GE(w.summary["rounds"][0]["handover_accuracy"].get<double>(),
+            rounds[0]["handover_accuracy"].get<double>());
+  EXPECT_NE(w.weights.SerializeAsString(), r.weights.SerializeAsString());
+  EXPECT_EQ(w.summary["switch_weight"].get<double>(), 20.0);
+  weighted.switch_weight = 0.5;
+  EXPECT_THROW(CloneMeta(c, frozen, pc, NormalizerConfig(), plan, weighted), ConfigError);
 }
 
 // A curriculum stage starts from the previous stage's meta policy: its first round is driven by

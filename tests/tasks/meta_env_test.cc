@@ -327,6 +327,15 @@ TEST(MetaEval, DeterministicOverThreadsAndCountsEveryTrial) {
     for (const auto& [to, n] : rows["start"].items()) starts += n.get<int>();
   }
   EXPECT_EQ(starts, 6);
+  // Each sequence's trials end in a success, a fall or the time limit (6 trials: all listed).
+  int listed = 0, falls = 0;
+  for (const Json& s : one["sequences"]) {
+    listed += s["trials"].get<int>();
+    falls += s["falls"].get<int>();
+    EXPECT_LE(s["successes"].get<int>() + s["falls"].get<int>(), s["trials"].get<int>());
+  }
+  EXPECT_EQ(listed, 6);
+  EXPECT_NEAR(falls, 6 * one["fall_rate"].get<double>(), 1e-9);
   EXPECT_GE(fail.trial, 0);
   EXPECT_FALSE(fail.frames.empty());
   const std::string png = ::testing::TempDir() + "/matrix.png";
