@@ -255,10 +255,10 @@ TEST(ChainPlan, PlanOfTheDeliveredSubtasks) {
     EXPECT_GT(sit["auc"].get<double>(), 0.5);
   }
 
-  // The critics' rules (ours): a turn its critic rates below turn_abort_value is never begun, so
+  // The critics' rules (ours): a turn its critic rates below turn_begin_value is never begun, so
   // with an unreachable threshold the planner only walks.
   MetaPlan no_turn = plan;
-  no_turn.config.turn_abort_value = 1e3;
+  no_turn.config.turn_begin_value = 1e3;
   o.trials = 3;
   o.planner = std::make_shared<const MetaPlan>(no_turn);
   const Json walked = EvaluateMeta(c, proto::ModelWeights(), frozen, o);
