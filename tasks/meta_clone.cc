@@ -35,13 +35,13 @@ Episode Collect(MetaEnv& env, MetaPlanner& planner, PolicyRunner* runner, double
   Rng rng(2 * seed + 1);
   const int od = env.spec().obs_dim;
   std::vector<float> obs(od), label(3), action(3);
+  const std::vector<int> ids = env.meta().choice_ids();
   env.Reset(obs.data());
   planner.Reset();
   for (int t = 0; t < env.spec().max_episode_steps; ++t) {
     planner.Act(env, label.data());
     e.obs.insert(e.obs.end(), obs.begin(), obs.end());
     e.labels.insert(e.labels.end(), label.begin(), label.end());
-    const std::vector<int> ids = env.meta().choice_ids();
     const int cls =
         std::clamp(static_cast<int>(std::lround(label[0])), 0, static_cast<int>(ids.size()) - 1);
     e.changes.push_back(ids[cls] != env.active());

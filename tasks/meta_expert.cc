@@ -57,6 +57,16 @@ bool MetaPlanner::Gate(const MetaEnv& env, int next, double value_min) {
   return waited >= plan_->config.value_wait_s || env.SubtaskValue(next) >= value_min;
 }
 
+bool MetaPlanner::HandBack(const MetaEnv& env, float value, double below) {
+  const float walk = env.SubtaskValue(kWalk);
+  if (!(value < below && walk > value && walk >= plan_->config.abort_walk_min)) return false;
+  const HumanoidChairEnv& h = env.humanoid();
+  recover_until_step_ =
+      h.episode_step() +
+      static_cast<int>(std::lround(plan_->config.abort_recover_s / h.spec().control_dt));
+  return true;
+}
+
 void MetaPlanner::Act(const MetaEnv& env, float* action) {
   const MetaPlan& p = *plan_;
   const PlannerConfig& c = p.config;
@@ -78,8 +88,9 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
     ready_since_step_ = -1;
   }
   // Turns and sit ignore the target; keep it ahead so a later walk starts sensibly.
-  Eigen::Vector2d target =
+  const Eigen::Vector2d ahead =
       root.xy + c.lookahead_m * Eigen::Vector2d(std::cos(root.yaw), std::sin(root.yaw));
+  Eigen::Vector2d target = ahead;
   if (want == kWalk) {
     const std::vector<double> features =
         c.regress_start_state ? TurnStartFeatures(h) : std::vector<double>();
@@ -90,9 +101,7 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
         WalkAroundChair(root.xy, v.start_point, h.SeatTargetWorld().head<2>(), p.sit_start.yaw,
                         c.clearance_m, c.avoid_front_m);
     target = around == v.start_point ? v.walk_target : around;
-    if (h.episode_step() < recover_until_step_) {
-      target = root.xy + c.lookahead_m * Eigen::Vector2d(std::cos(root.yaw), std::sin(root.yaw));
-    }
+    if (h.episode_step() < recover_until_step_) target = ahead;
     const int turn = side_ == 0 ? kLeftTurn : kRightTurn;
     if (HandOverNow(v, h.humanoid_state().root_lin_vel.head<2>(), period_s, p.sit_start.xy, rule) &&
         Gate(env, turn, c.turn_value_min) &&
@@ -105,12 +114,8 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
     const double t = (h.episode_step() - active_since_step_) * dt;
     // A turn its own critic gives up on goes back to the walker (before it falls), which plans
     // the turn again at the next decision.
-    bool abort = false;
-    if (c.turn_abort_value > 0) {
-      const float v = env.ActiveValue();
-      const float w = env.SubtaskValue(kWalk);
-      abort = v < c.turn_abort_value && w > v && w >= c.abort_walk_min;
-    }
+    const bool abort =
+        c.turn_abort_value > 0 && HandBack(env, env.ActiveValue(), c.turn_abort_value);
     // The sit as soon as its critic rates the state highly, within a wider heading window.
     const bool early =
         c.sit_value_early > 0 && t >= c.turn_min_s &&
@@ -118,22 +123,14 @@ void MetaPlanner::Act(const MetaEnv& env, float* action) {
         env.SubtaskValue(kSit) >= c.sit_value_early;
     if (abort) {
       want = kWalk;
-      recover_until_step_ =
-          h.episode_step() + static_cast<int>(std::lround(c.abort_recover_s / dt));
     } else if (t >= c.turn_max_s || early ||
                (t >= c.turn_min_s &&
                 SitNow(root.yaw, h.humanoid_state().root_ang_vel.z(), p.sit_start.yaw,
                        rule.tolerance_rad, period_s) &&
                 Gate(env, kSit, c.sit_value_min))) {
       want = kSit;
-      if (c.sit_retry_value > 0) {
-        const float v = env.SubtaskValue(kSit);
-        const float w = env.SubtaskValue(kWalk);
-        if (v < c.sit_retry_value && w > v && w >= c.abort_walk_min) {
-          want = kWalk;
-          recover_until_step_ =
-              h.episode_step() + static_cast<int>(std::lround(c.abort_recover_s / dt));
-        }
+      if (c.sit_retry_value > 0 && HandBack(env, env.SubtaskValue(kSit), c.sit_retry_value)) {
+        want = kWalk;
       }
     }
   }

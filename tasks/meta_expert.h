@@ -47,6 +47,9 @@ class MetaPlanner {
   // Whether the hand-over to `next` may happen now: its critic rates the state at least
   // value_min, or the wait is over (value_min 0: always).
   bool Gate(const MetaEnv& env, int next, double value_min);
+  // Whether the walker takes over from a subtask whose critic reads `value`: it is below `below`
+  // and the walker's critic is higher (and >= abort_walk_min); starts the walker's recovery then.
+  bool HandBack(const MetaEnv& env, float value, double below);
 };
 
 }  // namespace perch
