@@ -163,6 +163,9 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     int trials = 0;
     std::string matrix_png;
     bool planner = false;  // sit_chair: the scripted planner decides (no --model)
+    std::string save_sit_starts;  // sit_chair: a bank of the states at every hand-over to sit
+    std::string save_failed_sit_starts;  // ... of the trials that failed
+    std::string start_bank = "data/banks/walk_end_poses_eval.bin";  // sit_chair: walk starts
     int threads = std::max(1u, std::thread::hardware_concurrency());
   };
   auto o = std::make_shared<EvalOpts>();
@@ -230,7 +233,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       ->capture_default_str()
       ->check(CLI::Range(0, 1000000));
   cmd->add_flag("--force", o->force,
-                "overwrite an existing --record or --chain-save-sit-starts file");
+                "overwrite an existing --record, --chain-save-sit-starts or --save-sit-starts file");
   cmd->add_flag("--json", o->json, "print one JSON object on stdout");
   cmd->add_option("--trials", o->trials,
                   "sit_chair (the meta controller): number of trials (default: --episodes)")
@@ -242,6 +245,16 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "sit_chair: draw the subtask transition matrices (per start side) here");
   cmd->add_option("--threads", o->threads, "sit_chair: threads (default: all cores)")
       ->check(CLI::Range(1, 1024));
+  cmd->add_option("--save-sit-starts", o->save_sit_starts,
+                  "sit_chair: write the full state at every hand-over to sit as a start-state "
+                  "bank (with the chair; for sit's start.keep_pose)");
+  cmd->add_option("--save-failed-sit-starts", o->save_failed_sit_starts,
+                  "sit_chair: the same for the hand-overs of the trials that failed only (listed "
+                  "beside the full bank, they weigh the failures twice)");
+  cmd->add_option("--start-bank", o->start_bank,
+                  "sit_chair: the walk start states (default: the evaluation bank; name the "
+                  "training bank when sampling hand-overs to train on)")
+      ->capture_default_str();
   auto chain = std::make_shared<ChainFlags>();
   cmd->add_option("--zone", chain->zone,
                   "chain and sit_chair: spawn zone (1 easy, 2 lateral, 3 rear)")
@@ -425,8 +438,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         TaskEnvConfig mc = on_chair;
         mc.env.spawn = SpawnConfig();
         mc.env.spawn.zone = chain->zone;
-        mc.MutableSection<SitChairTaskConfig>().start.banks = {
-            "data/banks/walk_end_poses_eval.bin"};
+        mc.MutableSection<SitChairTaskConfig>().start.banks = {o->start_bank};
         const std::string model_file = o->planner ? "" : ModelFile(o->model);
         std::vector<FrozenPolicyData> frozen;
         if (!o->planner) frozen = FrozenPoliciesIn(o->model);
@@ -440,6 +452,16 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         mo.seed = o->eval.seed;
         mo.stochastic = o->eval.stochastic;
         mo.threads = o->threads;
+        std::vector<proto::BankState> sit_starts, failed_sit_starts;
+        // Refuse before the work, as the bank writer would after it.
+        for (const std::string* f : {&o->save_sit_starts, &o->save_failed_sit_starts}) {
+          if (!f->empty() && std::filesystem::exists(*f) && !o->force) {
+            throw ConfigError("--save-" + std::string(f == &o->save_sit_starts ? "" : "failed-") +
+                              "sit-starts " + *f + ": exists (--force replaces it)");
+          }
+        }
+        if (!o->save_sit_starts.empty()) mo.sit_starts = &sit_starts;
+        if (!o->save_failed_sit_starts.empty()) mo.failed_sit_starts = &failed_sit_starts;
         const auto t0 = std::chrono::steady_clock::now();
         const int every = std::max(1, mo.trials / 20);
         mo.progress = [&](int done, int successes) {
@@ -456,6 +478,27 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
             EvaluateMeta(mc, o->planner ? proto::ModelWeights() : LoadModelFile(model_file), frozen,
                          mo, film ? &ok : nullptr, film ? &bad : nullptr);
         result["model"] = o->planner ? Json("planner") : Json(model_file);
+        result["start_bank"] = o->start_bank;
+        auto write_bank = [&](const std::string& file, std::vector<proto::BankState>& states,
+                              const std::string& key) {
+          if (file.empty()) return;
+          if (states.empty()) {
+            std::cerr << "eval: no hand-over to sit for " << file << "; not written\n";
+            result[key] = {{"file", file}, {"states", 0}};
+            return;
+          }
+          const HumanoidModel hm = HumanoidModel::Load(mc.env.HumanoidPath());
+          proto::StateBank bank = NewStateBank("sit_chair", hm, o->eval.seed, o->eval.stochastic,
+                                               mc.ToJson());
+          bank.set_model_path(o->planner ? "planner" : model_file);
+          bank.set_count(static_cast<int>(states.size()));
+          bank.set_episodes_run(mo.trials);
+          for (proto::BankState& b : states) *bank.add_states() = std::move(b);
+          WriteStateBank(file, bank, o->force);
+          result[key] = {{"file", file}, {"states", bank.states_size()}};
+        };
+        write_bank(o->save_sit_starts, sit_starts, "sit_starts");
+        write_bank(o->save_failed_sit_starts, failed_sit_starts, "failed_sit_starts");
         result["wall_s"] =
             std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         if (film) {

@@ -166,6 +166,7 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
       active_steps_ = 0;
       episode_.sequence.push_back(sub);
       episode_.begin_value.push_back(policies_->Value(sub, *env_));
+      if (on_subtask_begin) on_subtask_begin(*env_, sub);
     }
     task_->set_active(sub);
     policies_->Act(sub, *env_, rng_, !meta_.subtask_stochastic, action_.data());

@@ -66,6 +66,8 @@ class MetaEnv : public Env, public FrozenPolicyEnv {
   // Called after every control step (recordings, filmstrips): the env, its step result and the
   // acting subtask.
   std::function<void(const HumanoidChairEnv&, const StepResult&, int active)> on_control_step;
+  // Called when a subtask (re)starts, before its first action (start-state banks of hand-overs).
+  std::function<void(const HumanoidChairEnv&, int sub)> on_subtask_begin;
 
  private:
   void WriteObservation(float* obs) const;

@@ -11,6 +11,7 @@
 #include "learner/policy.h"
 #include "tasks/meta_env.h"
 #include "tasks/meta_expert.h"
+#include "tasks/state_bank.h"
 #include "tasks/task_eval.h"
 #include "viz/canvas.h"
 
@@ -27,6 +28,7 @@ struct TrialResult {
   double spawn_theta = 0.0;
   std::vector<int> sequence;
   std::vector<float> begin_value;  // [run] the subtask's critic when it began
+  std::vector<proto::BankState> sit_starts;  // the states at its hand-overs to sit (when asked)
 };
 
 uint64_t TrialSeed(uint64_t seed, int trial) {
@@ -54,6 +56,14 @@ TrialResult RunTrial(MetaEnv& env, PolicyRunner* runner, MetaPlanner* planner,
       frames->push_back(f);
     };
   }
+  std::vector<proto::BankState> sit_starts;
+  if (o.sit_starts != nullptr || o.failed_sit_starts != nullptr) {
+    env.on_subtask_begin = [&](const HumanoidChairEnv& h, int sub) {
+      if (sub != kSit) return;
+      sit_starts.push_back(CaptureState(h));
+      sit_starts.back().set_episode(static_cast<uint64_t>(trial));
+    };
+  }
   env.Reset(obs.data());
   if (planner != nullptr) planner->Reset();
   for (int t = 0; t < env.spec().max_episode_steps; ++t) {
@@ -66,6 +76,7 @@ TrialResult RunTrial(MetaEnv& env, PolicyRunner* runner, MetaPlanner* planner,
     if (r.terminated || r.truncated) break;
   }
   env.on_control_step = nullptr;
+  env.on_subtask_begin = nullptr;
   const MetaEpisode& e = env.episode();
   TrialResult out;
   out.success = e.success_step >= 0;
@@ -77,6 +88,7 @@ TrialResult RunTrial(MetaEnv& env, PolicyRunner* runner, MetaPlanner* planner,
   out.spawn_theta = e.spawn_theta;
   out.sequence = e.sequence;
   out.begin_value = e.begin_value;
+  out.sit_starts = std::move(sit_starts);
   return out;
 }
 
@@ -220,6 +232,15 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
   std::map<std::string, int> seq_count;
   std::map<std::string, std::array<int, 2>> seq_ends;  // sequence -> {successes, falls}
   std::map<std::string, std::array<int, 2>> side_success;  // side -> {successes, trials}
+  for (const TrialResult& r : results) {
+    if (o.sit_starts != nullptr) {
+      o.sit_starts->insert(o.sit_starts->end(), r.sit_starts.begin(), r.sit_starts.end());
+    }
+    if (o.failed_sit_starts != nullptr && !r.success) {
+      o.failed_sit_starts->insert(o.failed_sit_starts->end(), r.sit_starts.begin(),
+                                  r.sit_starts.end());
+    }
+  }
   for (const TrialResult& r : results) {
     n_success += r.success;
     n_fell += r.fell;

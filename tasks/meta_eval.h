@@ -13,6 +13,7 @@
 
 #include "common/env.h"
 #include "common/json_util.h"
+#include "common/proto/bank.pb.h"
 #include "common/proto/model.pb.h"
 #include "tasks/task_env.h"
 #include "viz/filmstrip.h"
@@ -31,6 +32,11 @@ struct MetaEvalOptions {
   std::function<void(int done, int successes)> progress;  // called from the threads, serialised
   // When set, the scripted planner (tasks/meta_expert.h) decides instead of the meta policy.
   std::shared_ptr<const MetaPlan> planner;
+  // When set: the state at every hand-over to sit, in trial order (`episode` = the trial), for
+  // training the sit on them (`perch eval --save-sit-starts`); failed_sit_starts: only those of
+  // the trials that failed.
+  std::vector<proto::BankState>* sit_starts = nullptr;
+  std::vector<proto::BankState>* failed_sit_starts = nullptr;
 };
 
 // The control-step frames of one trial, labelled with the acting subtask.

@@ -192,6 +192,40 @@ TEST_F(CliTest, MetaEvalOverEveryChairPlansOnEachChair) {
   EXPECT_TRUE(Has(r.out, "--filmstrip")) << r.out;
 }
 
+TEST_F(CliTest, MetaEvalSavesItsHandOversToSitAsABankTheSitStartsFrom) {
+  const std::string src = PERCH_SOURCE_DIR;
+  const std::string bank = ::testing::TempDir() + "perch_plan_sit_starts.bin";
+  const std::string failed = ::testing::TempDir() + "perch_plan_sit_starts_failed.bin";
+  std::filesystem::remove(bank);
+  std::filesystem::remove(failed);
+  const std::string base = "eval --task sit_chair --planner --config " + src +
+                           "/configs/meta_zone1_plan3_30hz.json --zone 1 --trials 4 --seed 2 "
+                           "--threads 2 --json --start-bank data/banks/walk_end_poses.bin "
+                           "--save-sit-starts " + bank + " --save-failed-sit-starts " + failed;
+  Result r = Perch(base, false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Json j = Json::parse(r.out);
+  EXPECT_EQ(j["start_bank"], "data/banks/walk_end_poses.bin");
+  const int states = j["sit_starts"]["states"].get<int>();
+  ASSERT_GT(states, 0) << r.out;
+  EXPECT_LE(j["failed_sit_starts"]["states"].get<int>(), states);
+  EXPECT_EQ(states, j["handover_values"]["sit"]["runs"].get<int>());
+  // The sit starts from it (its clip kept where the hand-over put the body).
+  r = Perch("eval --model " + src + "/models/sit_from_plan3/policy.bin --config " + src +
+                "/configs/sit_from_plan2.json --start end-poses --bank " + bank +
+                " --episodes 2 --seed 1 --json",
+            false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(Json::parse(r.out)["episodes"], 2);
+  // An existing bank is not replaced without --force, before any trial runs.
+  const auto size = std::filesystem::file_size(bank);
+  r = Perch(base);
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "exists")) << r.out;
+  EXPECT_TRUE(Has(r.out, bank)) << r.out;
+  EXPECT_EQ(std::filesystem::file_size(bank), size);
+}
+
 TEST_F(CliTest, MetaCloneStageStartsFromTheConfigsPreviousStageOrSaysWhy) {
   const std::string src = PERCH_SOURCE_DIR;
   const std::string out = ::testing::TempDir() + "perch_stage_clone.bin";

@@ -343,6 +343,67 @@ TEST(MetaEval, DeterministicOverThreadsAndCountsEveryTrial) {
   EXPECT_GT(Canvas::LoadPng(png).width(), 500);
 }
 
+TEST(MetaEval, SavesTheStateAtEveryHandOverToSitAndTheFailedTrialsOnes) {
+  const TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"});
+  PpoLearner l(PolicyConfig::Meta(57), PpoConfig::Meta(), 5);
+  proto::ModelWeights meta;
+  l.ExportWeights(&meta);
+  MetaEvalOptions o;
+  o.trials = 5;
+  o.seed = 4;
+  o.stochastic = true;  // untrained and sampled: sit is chosen, left and chosen again
+  o.threads = 2;
+  std::vector<proto::BankState> all, failed;
+  o.sit_starts = &all;
+  o.failed_sit_starts = &failed;
+  const Json r = EvaluateMeta(c, meta, Untrained(), o);
+  // One state per run of sit, whichever row it came from.
+  int sit_runs = 0, failed_trials = 0;
+  for (const auto& [side, rows] : r["transitions"].items()) {
+    for (const auto& [from, to] : rows.items()) {
+      if (to.contains("sit")) sit_runs += to["sit"].get<int>();
+    }
+  }
+  ASSERT_GT(sit_runs, 0);
+  EXPECT_EQ(static_cast<int>(all.size()), sit_runs);
+  for (size_t i = 1; i < all.size(); ++i) EXPECT_LE(all[i - 1].episode(), all[i].episode());
+  for (const proto::BankState& b : all) {
+    EXPECT_LT(b.episode(), 5u);
+    EXPECT_TRUE(b.has_chair());
+    EXPECT_EQ(b.q_size(), b.qd_size());
+  }
+  failed_trials = static_cast<int>(std::lround(5 * (1.0 - r["success_rate"].get<double>())));
+  EXPECT_GT(failed_trials, 0);
+  EXPECT_LE(failed.size(), all.size());
+  // Nothing asked, nothing kept; the statistics do not depend on it.
+  MetaEvalOptions plain = o;
+  plain.sit_starts = nullptr;
+  plain.failed_sit_starts = nullptr;
+  const Json r2 = EvaluateMeta(c, meta, Untrained(), plain);
+  EXPECT_EQ(r["transitions"], r2["transitions"]);
+  EXPECT_EQ(r["min_dist_mean_m"], r2["min_dist_mean_m"]);
+}
+
+TEST(MetaEnv, TheHandOverHookSeesTheStateTheSubtaskStartsFrom) {
+  MetaEnv env(MetaConfigFor({"turn_left", "sit", "walk"}));
+  env.SetFrozenPolicies(Untrained());
+  std::vector<float> obs(57), walk{2.0f, 0.0f, 1.0f}, sit{1.0f, 0.0f, 1.0f};
+  env.Seed(5);
+  env.Reset(obs.data());
+  std::vector<std::pair<int, Eigen::Vector3d>> seen;
+  env.on_subtask_begin = [&](const HumanoidChairEnv& h, int sub) {
+    seen.push_back({sub, h.humanoid_state().root_pos});
+  };
+  env.Step(walk.data(), obs.data());
+  const Eigen::Vector3d before_sit = env.humanoid().humanoid_state().root_pos;
+  env.Step(sit.data(), obs.data());
+  ASSERT_EQ(seen.size(), 2u);
+  EXPECT_EQ(seen[0].first, kWalk);
+  EXPECT_EQ(seen[1].first, kSit);
+  EXPECT_EQ(seen[1].second, before_sit);  // before the sit's first action
+  EXPECT_NE(env.humanoid().humanoid_state().root_pos, before_sit);
+}
+
 // The delivered subtasks, loaded from the files the default config names.
 TEST(MetaEnv, LoadsTheConfiguredSubtasksAndTheWalkerWalksToATarget) {
   // Spawned 8 m from the zone's centre, facing it: 4 s of walking stays clear of the chair.
