@@ -164,7 +164,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     std::string matrix_png;
     bool planner = false;  // sit_chair: the scripted planner decides (no --model)
     std::string save_sit_starts;  // sit_chair: a bank of the states at every hand-over to sit
-    std::string save_failed_sit_starts;  // ... of the trials that failed
+    std::string save_failed_sit_starts;                             // ... of the trials that failed
     std::string start_bank = "data/banks/walk_end_poses_eval.bin";  // sit_chair: walk starts
     int threads = std::max(1u, std::thread::hardware_concurrency());
   };
@@ -232,8 +232,9 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "record only the first K episodes (0: all)")
       ->capture_default_str()
       ->check(CLI::Range(0, 1000000));
-  cmd->add_flag("--force", o->force,
-                "overwrite an existing --record, --chain-save-sit-starts or --save-sit-starts file");
+  cmd->add_flag(
+      "--force", o->force,
+      "overwrite an existing --record, --chain-save-sit-starts or --save-sit-starts file");
   cmd->add_flag("--json", o->json, "print one JSON object on stdout");
   cmd->add_option("--trials", o->trials,
                   "sit_chair (the meta controller): number of trials (default: --episodes)")
@@ -488,8 +489,8 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
             return;
           }
           const HumanoidModel hm = HumanoidModel::Load(mc.env.HumanoidPath());
-          proto::StateBank bank = NewStateBank("sit_chair", hm, o->eval.seed, o->eval.stochastic,
-                                               mc.ToJson());
+          proto::StateBank bank =
+              NewStateBank("sit_chair", hm, o->eval.seed, o->eval.stochastic, mc.ToJson());
           bank.set_model_path(o->planner ? "planner" : model_file);
           bank.set_count(static_cast<int>(states.size()));
           bank.set_episodes_run(mo.trials);

@@ -201,7 +201,8 @@ TEST_F(CliTest, MetaEvalSavesItsHandOversToSitAsABankTheSitStartsFrom) {
   const std::string base = "eval --task sit_chair --planner --config " + src +
                            "/configs/meta_zone1_plan3_30hz.json --zone 1 --trials 4 --seed 2 "
                            "--threads 2 --json --start-bank data/banks/walk_end_poses.bin "
-                           "--save-sit-starts " + bank + " --save-failed-sit-starts " + failed;
+                           "--save-sit-starts " +
+                           bank + " --save-failed-sit-starts " + failed;
   Result r = Perch(base, false);
   ASSERT_EQ(r.code, 0) << r.out;
   const Json j = Json::parse(r.out);
