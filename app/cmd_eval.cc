@@ -132,6 +132,20 @@ TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_p
   return TaskEnvConfig::FromJson(j, ctx);
 }
 
+// Hand-overs to sit (a chain's or the meta env's) as a start-state bank for sit's start.keep_pose.
+void WriteSitStartBank(const std::string& file, const std::string& task,
+                       const TaskEnvConfig& config, const std::string& model_path,
+                       const EvalOptions& eval, int episodes_run,
+                       std::vector<proto::BankState>& states, bool force) {
+  const HumanoidModel model = HumanoidModel::Load(config.env.HumanoidPath());
+  proto::StateBank bank = NewStateBank(task, model, eval.seed, eval.stochastic, config.ToJson());
+  bank.set_model_path(model_path);
+  bank.set_count(static_cast<int>(states.size()));
+  bank.set_episodes_run(episodes_run);
+  for (proto::BankState& b : states) *bank.add_states() = std::move(b);
+  WriteStateBank(file, bank, force);
+}
+
 std::vector<std::string> EvalTaskNames() {
   std::vector<std::string> names = TaskNames();
   names.push_back("chain");  // the scripted walk -> turn -> sit chain (tasks/hierarchy.h)
@@ -384,15 +398,11 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       if (!chain->save_sit_starts.empty()) {
         if (sit_starts.empty())
           throw ConfigError("--chain-save-sit-starts: no episode reached sit");
-        const HumanoidModel model = HumanoidModel::Load(config.env.HumanoidPath());
-        proto::StateBank bank =
-            NewStateBank("chain", model, o->eval.seed, o->eval.stochastic, config.ToJson());
-        bank.set_model_path(files[kWalk] + "," + files[kLeftTurn] + "," + files[kRightTurn]);
-        bank.set_count(static_cast<int>(sit_starts.size()));
-        bank.set_episodes_run(o->eval.episodes);
-        for (proto::BankState& b : sit_starts) *bank.add_states() = std::move(b);
-        WriteStateBank(chain->save_sit_starts, bank, o->force);
-        result["sit_starts"] = {{"file", chain->save_sit_starts}, {"states", bank.states_size()}};
+        const int n = static_cast<int>(sit_starts.size());
+        WriteSitStartBank(chain->save_sit_starts, "chain", config,
+                          files[kWalk] + "," + files[kLeftTurn] + "," + files[kRightTurn], o->eval,
+                          o->eval.episodes, sit_starts, o->force);
+        result["sit_starts"] = {{"file", chain->save_sit_starts}, {"states", n}};
       }
       std::string all_models;
       for (const std::string& f : files) all_models += (all_models.empty() ? "" : ",") + f;
@@ -488,15 +498,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
             result[key] = {{"file", file}, {"states", 0}};
             return;
           }
-          const HumanoidModel hm = HumanoidModel::Load(mc.env.HumanoidPath());
-          proto::StateBank bank =
-              NewStateBank("sit_chair", hm, o->eval.seed, o->eval.stochastic, mc.ToJson());
-          bank.set_model_path(o->planner ? "planner" : model_file);
-          bank.set_count(static_cast<int>(states.size()));
-          bank.set_episodes_run(mo.trials);
-          for (proto::BankState& b : states) *bank.add_states() = std::move(b);
-          WriteStateBank(file, bank, o->force);
-          result[key] = {{"file", file}, {"states", bank.states_size()}};
+          const int n = static_cast<int>(states.size());
+          WriteSitStartBank(file, "sit_chair", mc, o->planner ? "planner" : model_file, o->eval,
+                            mo.trials, states, o->force);
+          result[key] = {{"file", file}, {"states", n}};
         };
         write_bank(o->save_sit_starts, sit_starts, "sit_starts");
         write_bank(o->save_failed_sit_starts, failed_sit_starts, "failed_sit_starts");
