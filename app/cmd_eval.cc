@@ -176,9 +176,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     bool json = false;
     int trials = 0;
     std::string matrix_png;
-    bool planner = false;  // sit_chair: the scripted planner decides (no --model)
+    bool planner = false;         // sit_chair: the scripted planner decides (no --model)
     std::string save_sit_starts;  // sit_chair: a bank of the states at every hand-over to sit
-    std::string save_failed_sit_starts;                             // ... of the trials that failed
+    std::string save_failed_sit_starts;  // ... of the trials that failed
+    std::string hand_overs_to = "sit";   // sit_chair: whose hand-overs those banks hold
     std::string start_bank = "data/banks/walk_end_poses_eval.bin";  // sit_chair: walk starts
     int threads = std::max(1u, std::thread::hardware_concurrency());
   };
@@ -266,6 +267,11 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   cmd->add_option("--save-failed-sit-starts", o->save_failed_sit_starts,
                   "sit_chair: the same for the hand-overs of the trials that failed only (listed "
                   "beside the full bank, they weigh the failures twice)");
+  cmd->add_option("--hand-overs-to", o->hand_overs_to,
+                  "sit_chair: whose hand-overs --save-sit-starts and --save-failed-sit-starts "
+                  "write (sit, turn_left, turn_right or walk; a turn's bank is for its "
+                  "start.banks)")
+      ->capture_default_str();
   cmd->add_option("--start-bank", o->start_bank,
                   "sit_chair: the walk start states (default: the evaluation bank; name the "
                   "training bank when sampling hand-overs to train on)")
@@ -471,6 +477,11 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                               "sit-starts " + *f + ": exists (--force replaces it)");
           }
         }
+        mo.starts_subtask = SubtaskIdOf(o->hand_overs_to);
+        if (mo.starts_subtask < 0) {
+          throw ConfigError("--hand-overs-to \"" + o->hand_overs_to +
+                            "\": not a subtask (sit, turn_left, turn_right, walk)");
+        }
         if (!o->save_sit_starts.empty()) mo.sit_starts = &sit_starts;
         if (!o->save_failed_sit_starts.empty()) mo.failed_sit_starts = &failed_sit_starts;
         const auto t0 = std::chrono::steady_clock::now();
@@ -494,14 +505,15 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                               const std::string& key) {
           if (file.empty()) return;
           if (states.empty()) {
-            std::cerr << "eval: no hand-over to sit for " << file << "; not written\n";
+            std::cerr << "eval: no hand-over to " << o->hand_overs_to << " for " << file
+                      << "; not written\n";
             result[key] = {{"file", file}, {"states", 0}};
             return;
           }
           const int n = static_cast<int>(states.size());
           WriteSitStartBank(file, "sit_chair", mc, o->planner ? "planner" : model_file, o->eval,
                             mo.trials, states, o->force);
-          result[key] = {{"file", file}, {"states", n}};
+          result[key] = {{"file", file}, {"states", n}, {"hand_overs_to", o->hand_overs_to}};
         };
         write_bank(o->save_sit_starts, sit_starts, "sit_starts");
         write_bank(o->save_failed_sit_starts, failed_sit_starts, "failed_sit_starts");

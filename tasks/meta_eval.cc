@@ -17,6 +17,8 @@
 
 namespace perch {
 
+static_assert(kSit == 2, "MetaEvalOptions::starts_subtask defaults to the sit");
+
 namespace {
 
 struct TrialResult {
@@ -27,7 +29,7 @@ struct TrialResult {
   double pos_err_m = 0.0, yaw_err_rad = 0.0;
   double spawn_theta = 0.0;
   std::vector<int> sequence;
-  std::vector<float> begin_value;  // [run] the subtask's critic when it began
+  std::vector<float> begin_value;            // [run] the subtask's critic when it began
   std::vector<proto::BankState> sit_starts;  // the states at its hand-overs to sit (when asked)
 };
 
@@ -59,7 +61,7 @@ TrialResult RunTrial(MetaEnv& env, PolicyRunner* runner, MetaPlanner* planner,
   std::vector<proto::BankState> sit_starts;
   if (o.sit_starts != nullptr || o.failed_sit_starts != nullptr) {
     env.on_subtask_begin = [&](const HumanoidChairEnv& h, int sub) {
-      if (sub != kSit) return;
+      if (sub != o.starts_subtask) return;
       sit_starts.push_back(CaptureState(h));
       sit_starts.back().set_episode(static_cast<uint64_t>(trial));
     };
@@ -230,7 +232,7 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
   // Transition counts per start side (the chair faces +x: theta > 0 is its left, +y).
   std::map<std::string, std::map<std::string, std::map<std::string, int>>> trans;
   std::map<std::string, int> seq_count;
-  std::map<std::string, std::array<int, 2>> seq_ends;  // sequence -> {successes, falls}
+  std::map<std::string, std::array<int, 2>> seq_ends;      // sequence -> {successes, falls}
   std::map<std::string, std::array<int, 2>> side_success;  // side -> {successes, trials}
   for (const TrialResult& r : results) {
     if (o.sit_starts != nullptr) {

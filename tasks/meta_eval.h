@@ -37,6 +37,9 @@ struct MetaEvalOptions {
   // the trials that failed.
   std::vector<proto::BankState>* sit_starts = nullptr;
   std::vector<proto::BankState>* failed_sit_starts = nullptr;
+  // Whose hand-overs those are (a SubtaskId; `perch eval --hand-overs-to`): the sit by default,
+  // a turn to train the turn on the states the meta hands it.
+  int starts_subtask = 2;  // kSit (tasks/hierarchy.h)
 };
 
 // The control-step frames of one trial, labelled with the acting subtask.

@@ -227,14 +227,44 @@ TEST_F(CliTest, MetaEvalSavesItsHandOversToSitAsABankTheSitStartsFrom) {
   EXPECT_EQ(std::filesystem::file_size(bank), size);
 }
 
+TEST_F(CliTest, MetaEvalSavesTheHandOversToATurnAsABankTheTurnStartsFrom) {
+  const std::string src = PERCH_SOURCE_DIR;
+  const std::string bank = ::testing::TempDir() + "perch_plan_turn_starts.bin";
+  std::filesystem::remove(bank);
+  const std::string base = "eval --task sit_chair --planner --config " + src +
+                           "/configs/meta_zone1_plan3_30hz.json --zone 1 --trials 4 --seed 2 "
+                           "--threads 2 --json --start-bank data/banks/walk_end_poses.bin "
+                           "--save-sit-starts " +
+                           bank + " --hand-overs-to ";
+  // A name that is no subtask is refused before any trial, and nothing is written.
+  Result r = Perch(base + "stand_up");
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "--hand-overs-to \"stand_up\": not a subtask")) << r.out;
+  EXPECT_FALSE(std::filesystem::exists(bank));
+  r = Perch(base + "turn_left", false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Json j = Json::parse(r.out);
+  EXPECT_EQ(j["sit_starts"]["hand_overs_to"], "turn_left");
+  const int states = j["sit_starts"]["states"].get<int>();
+  ASSERT_GT(states, 0) << r.out;
+  EXPECT_EQ(states, j["handover_values"]["turn_left"]["runs"].get<int>());
+  // The left turn starts from it.
+  r = Perch("eval --model " + src + "/models/turn_left_from_walk/policy.bin --config " + src +
+                "/configs/turn_left_from_walk.json --start end-poses --bank " + bank +
+                " --episodes 2 --seed 1 --json",
+            false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(Json::parse(r.out)["episodes"], 2);
+}
+
 TEST_F(CliTest, MetaCloneStageStartsFromTheConfigsPreviousStageOrSaysWhy) {
   const std::string src = PERCH_SOURCE_DIR;
   const std::string out = ::testing::TempDir() + "perch_stage_clone.bin";
   std::filesystem::remove(out);
   // The Zone 1 config's cluster.init_from is the PPO meta of 57 inputs (the planner's configs
   // observe 62): a clone stage cannot continue from it, and the message names file and field.
-  Result r = Perch("meta-clone --config " + src + "/configs/meta_zone1_plan2_30hz.json --stage --out " +
-                   out + " --episodes 1");
+  Result r = Perch("meta-clone --config " + src +
+                   "/configs/meta_zone1_plan2_30hz.json --stage --out " + out + " --episodes 1");
   EXPECT_NE(r.code, 0);
   EXPECT_TRUE(Has(r.out, "meta_zone1/policy.bin: does not fit")) << r.out;
   EXPECT_TRUE(Has(r.out, "obs_dim")) << r.out;

@@ -384,6 +384,38 @@ TEST(MetaEval, SavesTheStateAtEveryHandOverToSitAndTheFailedTrialsOnes) {
   EXPECT_EQ(r["min_dist_mean_m"], r2["min_dist_mean_m"]);
 }
 
+TEST(MetaEval, SavesTheHandOversToTheSubtaskItIsAskedFor) {
+  const TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"});
+  PpoLearner l(PolicyConfig::Meta(57), PpoConfig::Meta(), 5);
+  proto::ModelWeights meta;
+  l.ExportWeights(&meta);
+  MetaEvalOptions o;
+  o.trials = 12;
+  o.seed = 4;
+  o.stochastic = true;
+  o.threads = 2;
+  // One state per run of each subtask, counted from the transition matrices.
+  auto runs_of = [](const Json& r, const std::string& name) {
+    int n = 0;
+    for (const auto& [side, rows] : r["transitions"].items()) {
+      for (const auto& [from, to] : rows.items()) {
+        if (to.contains(name)) n += to[name].get<int>();
+      }
+    }
+    return n;
+  };
+  for (int sub : {kLeftTurn, kRightTurn, kWalk}) {
+    std::vector<proto::BankState> all;
+    o.sit_starts = &all;
+    o.starts_subtask = sub;
+    const Json r = EvaluateMeta(c, meta, Untrained(), o);
+    const int runs = runs_of(r, SubtaskName(sub));
+    ASSERT_GT(runs, 0) << SubtaskName(sub);
+    EXPECT_EQ(static_cast<int>(all.size()), runs) << SubtaskName(sub);
+    EXPECT_NE(runs, runs_of(r, "sit")) << "the test cannot tell the subtasks apart";
+  }
+}
+
 TEST(MetaEnv, TheHandOverHookSeesTheStateTheSubtaskStartsFrom) {
   MetaEnv env(MetaConfigFor({"turn_left", "sit", "walk"}));
   env.SetFrozenPolicies(Untrained());
