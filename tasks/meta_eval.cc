@@ -30,7 +30,7 @@ struct TrialResult {
   double spawn_theta = 0.0;
   std::vector<int> sequence;
   std::vector<float> begin_value;            // [run] the subtask's critic when it began
-  std::vector<proto::BankState> sit_starts;  // the states at its hand-overs to sit (when asked)
+  std::vector<proto::BankState> sit_starts;  // its hand-overs to o.starts_subtask (when asked)
 };
 
 uint64_t TrialSeed(uint64_t seed, int trial) {

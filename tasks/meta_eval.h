@@ -32,9 +32,9 @@ struct MetaEvalOptions {
   std::function<void(int done, int successes)> progress;  // called from the threads, serialised
   // When set, the scripted planner (tasks/meta_expert.h) decides instead of the meta policy.
   std::shared_ptr<const MetaPlan> planner;
-  // When set: the state at every hand-over to sit, in trial order (`episode` = the trial), for
-  // training the sit on them (`perch eval --save-sit-starts`); failed_sit_starts: only those of
-  // the trials that failed.
+  // When set: the state at every hand-over to starts_subtask (the sit unless changed), in trial
+  // order (`episode` = the trial), for training that subtask on them (`perch eval
+  // --save-sit-starts`); failed_sit_starts: only those of the trials that failed.
   std::vector<proto::BankState>* sit_starts = nullptr;
   std::vector<proto::BankState>* failed_sit_starts = nullptr;
   // Whose hand-overs those are (a SubtaskId; `perch eval --hand-overs-to`): the sit by default,
