@@ -37,6 +37,25 @@ std::vector<FrozenPolicyData> Untrained() {
   return out;
 }
 
+// An untrained meta policy of the 57-input layout (seeded).
+proto::ModelWeights UntrainedMeta(uint64_t seed) {
+  PpoLearner l(PolicyConfig::Meta(57), PpoConfig::Meta(), seed);
+  proto::ModelWeights meta;
+  l.ExportWeights(&meta);
+  return meta;
+}
+
+// The runs of one subtask in an evaluation: every transition into it, whichever row and side.
+int RunsOf(const Json& r, const std::string& name) {
+  int n = 0;
+  for (const auto& [side, rows] : r["transitions"].items()) {
+    for (const auto& [from, to] : rows.items()) {
+      if (to.contains(name)) n += to[name].get<int>();
+    }
+  }
+  return n;
+}
+
 TEST(MetaEnv, SpecIsTheMetaDecision) {
   MetaEnv env(MetaConfigFor({"turn_left", "turn_right", "sit", "walk"}));
   EXPECT_EQ(env.spec().obs_dim, 57);
@@ -300,9 +319,7 @@ TEST(MetaEval, RankAucCountsPairsAndTiesHalf) {
 
 TEST(MetaEval, DeterministicOverThreadsAndCountsEveryTrial) {
   const TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"});
-  PpoLearner l(PolicyConfig::Meta(57), PpoConfig::Meta(), 4);
-  proto::ModelWeights meta;
-  l.ExportWeights(&meta);
+  const proto::ModelWeights meta = UntrainedMeta(4);
   MetaEvalOptions o;
   o.trials = 6;
   o.seed = 3;
@@ -345,9 +362,7 @@ TEST(MetaEval, DeterministicOverThreadsAndCountsEveryTrial) {
 
 TEST(MetaEval, SavesTheStateAtEveryHandOverToSitAndTheFailedTrialsOnes) {
   const TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"});
-  PpoLearner l(PolicyConfig::Meta(57), PpoConfig::Meta(), 5);
-  proto::ModelWeights meta;
-  l.ExportWeights(&meta);
+  const proto::ModelWeights meta = UntrainedMeta(5);
   MetaEvalOptions o;
   o.trials = 5;
   o.seed = 4;
@@ -358,12 +373,8 @@ TEST(MetaEval, SavesTheStateAtEveryHandOverToSitAndTheFailedTrialsOnes) {
   o.failed_sit_starts = &failed;
   const Json r = EvaluateMeta(c, meta, Untrained(), o);
   // One state per run of sit, whichever row it came from.
-  int sit_runs = 0, failed_trials = 0;
-  for (const auto& [side, rows] : r["transitions"].items()) {
-    for (const auto& [from, to] : rows.items()) {
-      if (to.contains("sit")) sit_runs += to["sit"].get<int>();
-    }
-  }
+  const int sit_runs = RunsOf(r, "sit");
+  int failed_trials = 0;
   ASSERT_GT(sit_runs, 0);
   EXPECT_EQ(static_cast<int>(all.size()), sit_runs);
   for (size_t i = 1; i < all.size(); ++i) EXPECT_LE(all[i - 1].episode(), all[i].episode());
@@ -386,33 +397,22 @@ TEST(MetaEval, SavesTheStateAtEveryHandOverToSitAndTheFailedTrialsOnes) {
 
 TEST(MetaEval, SavesTheHandOversToTheSubtaskItIsAskedFor) {
   const TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"});
-  PpoLearner l(PolicyConfig::Meta(57), PpoConfig::Meta(), 5);
-  proto::ModelWeights meta;
-  l.ExportWeights(&meta);
+  const proto::ModelWeights meta = UntrainedMeta(5);
   MetaEvalOptions o;
   o.trials = 12;
   o.seed = 4;
   o.stochastic = true;
   o.threads = 2;
   // One state per run of each subtask, counted from the transition matrices.
-  auto runs_of = [](const Json& r, const std::string& name) {
-    int n = 0;
-    for (const auto& [side, rows] : r["transitions"].items()) {
-      for (const auto& [from, to] : rows.items()) {
-        if (to.contains(name)) n += to[name].get<int>();
-      }
-    }
-    return n;
-  };
   for (int sub : {kLeftTurn, kRightTurn, kWalk}) {
     std::vector<proto::BankState> all;
     o.sit_starts = &all;
     o.starts_subtask = sub;
     const Json r = EvaluateMeta(c, meta, Untrained(), o);
-    const int runs = runs_of(r, SubtaskName(sub));
+    const int runs = RunsOf(r, SubtaskName(sub));
     ASSERT_GT(runs, 0) << SubtaskName(sub);
     EXPECT_EQ(static_cast<int>(all.size()), runs) << SubtaskName(sub);
-    EXPECT_NE(runs, runs_of(r, "sit")) << "the test cannot tell the subtasks apart";
+    EXPECT_NE(runs, RunsOf(r, "sit")) << "the test cannot tell the subtasks apart";
   }
 }
 
