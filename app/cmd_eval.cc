@@ -132,7 +132,8 @@ TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_p
   return TaskEnvConfig::FromJson(j, ctx);
 }
 
-// Hand-overs to sit (a chain's or the meta env's) as a start-state bank for sit's start.keep_pose.
+// Hand-overs (a chain's to sit, or the meta env's to any subtask) as a start-state bank for that
+// subtask's start.banks.
 void WriteSitStartBank(const std::string& file, const std::string& task,
                        const TaskEnvConfig& config, const std::string& model_path,
                        const EvalOptions& eval, int episodes_run,
