@@ -99,8 +99,8 @@ TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_p
   }
   if (o.start == "end-poses") {
     if (o.banks.empty()) throw ConfigError("--start end-poses: needs --bank FILE");
-    if (task != "turn_left" && task != "turn_right" && task != "sit") {
-      throw ConfigError("--start end-poses: only for turn_left, turn_right and sit");
+    if (task != "turn_left" && task != "turn_right" && task != "sit" && task != "walk") {
+      throw ConfigError("--start end-poses: only for walk, turn_left, turn_right and sit");
     }
     // Keeps the config's other start settings (zero_root_ang_vel).
     if (!sec.contains("start") || !sec["start"].is_object()) sec["start"] = Json::object();
@@ -109,7 +109,7 @@ TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_p
     if (!o.bank_ang_vel.empty()) sec["start"]["zero_root_ang_vel"] = o.bank_ang_vel == "zero";
   } else if (!o.banks.empty() || !o.bank_ang_vel.empty()) {
     throw ConfigError("--bank / --bank-ang-vel: only with --start end-poses");
-  } else if (task != "walk" && task != "stand" && sec.contains("start")) {
+  } else if (task != "stand" && sec.contains("start")) {
     // A fine-tuned policy is evaluated from its clip's first frame unless asked otherwise, as
     // the subtask itself is: without the banks' placement noise (sit applies it to every
     // episode of a run that lists banks), so the retention figure compares like with like.
@@ -270,8 +270,8 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "beside the full bank, they weigh the failures twice)");
   cmd->add_option("--hand-overs-to", o->hand_overs_to,
                   "sit_chair: whose hand-overs --save-sit-starts and --save-failed-sit-starts "
-                  "write (sit, turn_left, turn_right or walk; a turn's bank is for its "
-                  "start.banks)")
+                  "write (sit, turn_left, turn_right or walk; a turn's or the walk's bank is for "
+                  "its start.banks; the episode's first run is not a hand-over)")
       ->capture_default_str();
   cmd->add_option("--start-bank", o->start_bank,
                   "sit_chair: the walk start states (default: the evaluation bank; name the "

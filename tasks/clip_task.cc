@@ -153,14 +153,14 @@ void ClipTask::PerturbJoints(double rad, const HumanoidChairEnv& env, Rng& rng, 
   }
 }
 
-bool ClipTask::BankStart(const BankStartConfig& c, const HumanoidChairEnv& env, Rng& rng,
-                         double yaw, const Eigen::Vector2d& xy, HumanoidState* s) {
-  from_bank_ = false;
+bool DrawBankStart(const BankStartConfig& c, const HumanoidChairEnv& env, Rng& rng,
+                   std::optional<double> yaw, const Eigen::Vector2d& xy,
+                   std::shared_ptr<const StartBank>* cache, HumanoidState* s) {
   if (c.banks.empty()) return false;
   // The coin first, so the draws do not depend on whether the bank is loaded.
   if (!(rng.Uniform(0.0, 1.0) < c.prob)) return false;
-  if (!bank_) bank_ = LoadStartBanks(c.banks, env.model());
-  const proto::BankState& b = bank_->states[rng.UniformInt(bank_->states.size())];
+  if (!*cache) *cache = LoadStartBanks(c.banks, env.model());
+  const proto::BankState& b = (*cache)->states[rng.UniformInt((*cache)->states.size())];
   HumanoidState h = HumanoidStateOf(b);
   if (c.keep_pose) {
     if (!b.has_chair()) {
@@ -176,10 +176,9 @@ bool ClipTask::BankStart(const BankStartConfig& c, const HumanoidChairEnv& env, 
     h = TransformHorizontally(h, turn, to.x, to.y);
     if (c.zero_root_ang_vel) h.root_ang_vel.setZero();
     *s = h;
-    from_bank_ = true;
     return true;
   }
-  const double turn = yaw - RpyFromQuat(h.root_quat).z();
+  const double turn = yaw.has_value() ? *yaw - RpyFromQuat(h.root_quat).z() : 0.0;
   const Eigen::AngleAxisd rz(turn, Eigen::Vector3d::UnitZ());
   h.root_quat = (Eigen::Quaterniond(rz) * h.root_quat).normalized();
   h.root_lin_vel = rz * h.root_lin_vel;
@@ -188,8 +187,13 @@ bool ClipTask::BankStart(const BankStartConfig& c, const HumanoidChairEnv& env, 
   h.root_pos.x() = xy.x();
   h.root_pos.y() = xy.y();
   *s = h;
-  from_bank_ = true;
   return true;
+}
+
+bool ClipTask::BankStart(const BankStartConfig& c, const HumanoidChairEnv& env, Rng& rng,
+                         double yaw, const Eigen::Vector2d& xy, HumanoidState* s) {
+  from_bank_ = DrawBankStart(c, env, rng, yaw, xy, &bank_, s);
+  return from_bank_;
 }
 
 Json ClipTask::SaveMemory() const {

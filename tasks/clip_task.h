@@ -8,11 +8,14 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <array>
+#include <memory>
+#include <optional>
 #include <string>
 
 #include "common/json_util.h"
 #include "envs/humanoid_env.h"
 #include "motion/reference_motion.h"
+#include "tasks/bank_start.h"
 #include "tasks/imitation.h"
 #include "tasks/state_bank.h"
 
@@ -41,20 +44,14 @@ struct ClipPlacement {
   MotionPose Apply(const MotionPose& p) const;
 };
 
-// Episode starts from a start-state bank (transition fine-tuning, notes 4.3 "*_from_*"): with
-// probability `prob` an episode starts from a random bank state instead of the clip.
-struct BankStartConfig {
-  std::vector<std::string> banks;  // bank files (their union); empty: never
-  double prob = 1.0;
-  // The authors restore a 51-number state into a freshly loaded humanoid, so the torso's angular
-  // velocity is zero (notes 1.6); ours keeps the recorded one unless this is set.
-  bool zero_root_ang_vel = false;
-  // The state where it was relative to its chair (a bank sampled in the chain, whose states
-  // hold the chair), instead of moved to the clip's first frame.
-  bool keep_pose = false;
-  static BankStartConfig FromJson(const Json& j, const std::string& ctx);
-  Json ToJson() const;
-};
+// The bank start of one episode (any task with a BankStartConfig): false when it starts otherwise
+// (no bank, or the coin said so); else a uniform bank state with its yaw set to `yaw` (nullopt:
+// its own) and its root moved to `xy` (height, joints and velocities as sampled; velocities
+// rotated with the yaw), or, with c.keep_pose, where it was relative to its chair. Loads the
+// banks into *cache at the first call.
+bool DrawBankStart(const BankStartConfig& c, const HumanoidChairEnv& env, Rng& rng,
+                   std::optional<double> yaw, const Eigen::Vector2d& xy,
+                   std::shared_ptr<const StartBank>* cache, HumanoidState* s);
 
 class ClipTask : public Task {
  public:
@@ -96,11 +93,9 @@ class ClipTask : public Task {
   void RootVelocities(bool finite_difference, const HumanoidChairEnv& env, int step,
                       Eigen::Vector3d* v, Eigen::Vector3d* v_ref) const;
   void RememberPose(const HumanoidChairEnv& env);  // end of every step and at reset
-  // A bank state with its yaw set to `yaw` and its root moved to `xy` (height, joints and
-  // velocities as sampled; velocities rotated with the yaw), or false when this episode starts
-  // from the clip (no bank, or the coin said so). Loads the banks at the first call.
   // Joint angles += U(-rad, rad), kept inside the joint limits (evaluation: distinct trials).
   static void PerturbJoints(double rad, const HumanoidChairEnv& env, Rng& rng, HumanoidState* s);
+  // DrawBankStart with this task's bank cache; false: the episode starts from the clip.
   bool BankStart(const BankStartConfig& c, const HumanoidChairEnv& env, Rng& rng, double yaw,
                  const Eigen::Vector2d& xy, HumanoidState* s);
 

@@ -61,7 +61,8 @@ TrialResult RunTrial(MetaEnv& env, PolicyRunner* runner, MetaPlanner* planner,
   std::vector<proto::BankState> sit_starts;
   if (o.sit_starts != nullptr || o.failed_sit_starts != nullptr) {
     env.on_subtask_begin = [&](const HumanoidChairEnv& h, int sub) {
-      if (sub != o.starts_subtask) return;
+      // The episode's first run starts from the spawn, not from a hand-over.
+      if (sub != o.starts_subtask || env.episode().sequence.size() < 2) return;
       sit_starts.push_back(CaptureState(h));
       sit_starts.back().set_episode(static_cast<uint64_t>(trial));
     };

@@ -38,7 +38,8 @@ struct MetaEvalOptions {
   std::vector<proto::BankState>* sit_starts = nullptr;
   std::vector<proto::BankState>* failed_sit_starts = nullptr;
   // Whose hand-overs those are (a SubtaskId; `perch eval --hand-overs-to`): the sit by default,
-  // a turn to train the turn on the states the meta hands it.
+  // a turn to train the turn on the states the meta hands it, the walk for its hand-backs (the
+  // episode's first run, from the spawn, is never a hand-over).
   int starts_subtask = 2;  // kSit (tasks/hierarchy.h)
 };
 

@@ -47,6 +47,9 @@ TaskDef WalkDef() {
     if (j != nullptr) c->walk = WalkTaskConfig::FromJson(*j, ctx);
   };
   d.write = [](const TaskEnvConfig& c) { return c.walk.ToJson(); };
+  d.check = [](const TaskEnvConfig& c, const std::string& ctx) {
+    CheckBanks(c.walk.start, c, ctx + ".walk");
+  };
   d.make = [](const TaskEnvConfig& c) -> std::unique_ptr<Task> {
     return std::make_unique<WalkTask>(c.walk, c.control_dt());
   };

@@ -2,8 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "common/paths.h"
+#include "tasks/clip_task.h"
 
 namespace perch {
 
@@ -58,6 +60,7 @@ WalkTaskConfig WalkTaskConfig::FromJson(const Json& j, const std::string& ctx) {
                   "fall_restart_prob",
                   "fall_restart_lead_s",
                   "fall_restart_pool",
+                  "start",
                   "forward_target"},
                  ctx);
   WalkTaskConfig c;
@@ -96,6 +99,8 @@ WalkTaskConfig WalkTaskConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "fall_restart_lead_s", c.fall_restart_lead_s, ctx);
   GetOptional(j, "fall_restart_pool", c.fall_restart_pool, ctx);
   GetOptional(j, "forward_target", c.forward_target, ctx);
+  if (j.contains("start")) c.start = BankStartConfig::FromJson(j["start"], ctx + ".start");
+  if (c.start.keep_pose) throw ConfigError(ctx + ".start.keep_pose: the walk has no chair frame");
   if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
   if (!(c.target_redraw_s > 0)) throw ConfigError(ctx + ".target_redraw_s: must be > 0");
   if (!(c.target_min_dist_m > 0) || c.target_max_dist_m < c.target_min_dist_m) {
@@ -139,6 +144,7 @@ Json WalkTaskConfig::ToJson() const {
               {"fall_restart_prob", fall_restart_prob},
               {"fall_restart_lead_s", fall_restart_lead_s},
               {"fall_restart_pool", fall_restart_pool},
+              {"start", start.ToJson()},
               {"forward_target", forward_target}};
 }
 
@@ -179,12 +185,37 @@ HumanoidState WalkTask::ReferenceState(int step) const {
 }
 
 bool WalkTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) {
+  // No bank: no draw, so runs without one draw as before.
+  from_bank_ = DrawBankStart(c_.start, env, rng, std::nullopt, Eigen::Vector2d::Zero(), &bank_, s);
+  if (from_bank_) {
+    // The reference goes on from the clip's pose nearest to the state's, under its root.
+    m_.t0 = NearestPhase(s->q);
+    const MotionPose p = motion_.At(m_.t0);
+    m_.offset =
+        Eigen::Vector3d(s->root_pos.x() - p.root_pos.x(), s->root_pos.y() - p.root_pos.y(), 0.0);
+    return true;
+  }
   m_.t0 = c_.reference_state_init ? rng.Uniform(0.0, motion_.duration()) : 0.0;
   const MotionPose start = motion_.At(m_.t0);
   // Root over the origin; the clip already faces +x (docs/motion.md), so no rotation.
   m_.offset = Eigen::Vector3d(-start.root_pos.x(), -start.root_pos.y(), 0.0);
   *s = ReferenceState(0);
   return true;
+}
+
+double WalkTask::NearestPhase(const std::array<double, HumanoidModel::kNumJoints>& q) const {
+  double best_t = 0.0, best = std::numeric_limits<double>::infinity();
+  const int n = std::max(1, static_cast<int>(std::floor(motion_.duration() / dt_)));
+  for (int i = 0; i < n; ++i) {
+    const MotionPose p = motion_.At(i * dt_);
+    double d = 0.0;
+    for (int j = 0; j < HumanoidModel::kNumJoints; ++j) d += (q[j] - p.q[j]) * (q[j] - p.q[j]);
+    if (d < best) {
+      best = d;
+      best_t = i * dt_;
+    }
+  }
+  return best_t;
 }
 
 double WalkTask::TargetDistance(const HumanoidChairEnv& env) {

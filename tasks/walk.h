@@ -16,6 +16,7 @@
 #include "common/json_util.h"
 #include "envs/humanoid_env.h"
 #include "motion/reference_motion.h"
+#include "tasks/bank_start.h"
 #include "tasks/imitation.h"
 
 namespace perch {
@@ -62,6 +63,12 @@ struct WalkTaskConfig {
   double fall_restart_prob = 0.0;
   double fall_restart_lead_s = 1.5;  // how long before the fall [s]
   int fall_restart_pool = 64;        // falls kept per env, the oldest replaced
+  // Training starts from a start-state bank (ours; default: none = the paper): with start.prob an
+  // episode starts from a bank state (its own yaw, root over the origin), e.g. the meta's
+  // hand-backs to the walker after an aborted turn (perch eval --task sit_chair --hand-overs-to
+  // walk). The reference phase is the clip's nearest pose. `perch eval` turns it off unless
+  // --start end-poses.
+  BankStartConfig start;
   // Stage "forward": the goal feature points at this fixed world point (Roboschool's default) [m].
   std::array<double, 2> forward_target{1000.0, 0.0};
 
@@ -99,7 +106,10 @@ class WalkTask : public Task {
   MotionPose ReferenceAt(int step) const;
   // As a HumanoidState (what perfect tracking would be).
   HumanoidState ReferenceState(int step) const;
-  double start_time() const { return m_.t0; }  // reference time at step 0 [s]
+  double start_time() const { return m_.t0; }            // reference time at step 0 [s]
+  bool started_from_bank() const { return from_bank_; }  // this episode
+  // The clip time [s] (control steps from 0) whose joint angles are nearest to q (squared sum).
+  double NearestPhase(const std::array<double, HumanoidModel::kNumJoints>& q) const;
   const WalkTerms& last_terms() const { return m_.terms; }
   Json LastRewardTerms() const override {
     const WalkTerms& t = m_.terms;
@@ -143,6 +153,8 @@ class WalkTask : public Task {
   ReferenceMotion motion_;
   int redraw_steps_ = 150;
   Memory m_;
+  std::shared_ptr<const StartBank> bank_;
+  bool from_bank_ = false;
 };
 
 }  // namespace perch

@@ -227,7 +227,7 @@ TEST_F(CliTest, MetaEvalSavesItsHandOversToSitAsABankTheSitStartsFrom) {
   EXPECT_EQ(std::filesystem::file_size(bank), size);
 }
 
-TEST_F(CliTest, MetaEvalSavesTheHandOversToATurnAsABankTheTurnStartsFrom) {
+TEST_F(CliTest, MetaEvalSavesTheHandOversToATurnOrTheWalkerAsABankTheyStartFrom) {
   const std::string src = PERCH_SOURCE_DIR;
   const std::string bank = ::testing::TempDir() + "perch_plan_turn_starts.bin";
   std::filesystem::remove(bank);
@@ -255,6 +255,29 @@ TEST_F(CliTest, MetaEvalSavesTheHandOversToATurnAsABankTheTurnStartsFrom) {
             false);
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_EQ(Json::parse(r.out)["episodes"], 2);
+  // The walker starts from any bank too (its hand-backs in training, walk.start.banks).
+  const std::string walker = "eval --task walk --model " + src +
+                             "/models/walk_stage2_fallrestart/checkpoints/ckpt-0000013900.bin "
+                             "--episodes 2 --seed 1 --json";
+  r = Perch(walker + " --start end-poses --bank " + bank, false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Json from_bank = Json::parse(r.out);
+  EXPECT_EQ(from_bank["episodes"], 2);
+  r = Perch(walker, false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(Json::parse(r.out)["mean_return"], from_bank["mean_return"]);
+  // The walker's hand-overs are its hand-backs: the runs that began at the spawn are not banked.
+  std::filesystem::remove(bank);
+  r = Perch(base + "walk", false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Json w = Json::parse(r.out);
+  int first = 0;
+  for (const auto& [side, rows] : w["transitions"].items()) {
+    if (rows["start"].contains("walk")) first += rows["start"]["walk"].get<int>();
+  }
+  EXPECT_GT(first, 0);
+  EXPECT_EQ(w["sit_starts"]["states"].get<int>(),
+            w["handover_values"]["walk"]["runs"].get<int>() - first);
 }
 
 TEST_F(CliTest, MetaCloneStageStartsFromTheConfigsPreviousStageOrSaysWhy) {

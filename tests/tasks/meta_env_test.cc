@@ -46,15 +46,19 @@ proto::ModelWeights UntrainedMeta(uint64_t seed) {
 }
 
 // The runs of one subtask in an evaluation: every transition into it, whichever row and side.
-int RunsOf(const Json& r, const std::string& name) {
+int RunsOf(const Json& r, const std::string& name, bool with_first = true) {
   int n = 0;
   for (const auto& [side, rows] : r["transitions"].items()) {
     for (const auto& [from, to] : rows.items()) {
+      if (!with_first && from == "start") continue;
       if (to.contains(name)) n += to[name].get<int>();
     }
   }
   return n;
 }
+
+// The runs that began at a hand-over: not the episode's first, which begins at the spawn.
+int HandOversTo(const Json& r, const std::string& name) { return RunsOf(r, name, false); }
 
 TEST(MetaEnv, SpecIsTheMetaDecision) {
   MetaEnv env(MetaConfigFor({"turn_left", "turn_right", "sit", "walk"}));
@@ -360,30 +364,37 @@ TEST(MetaEval, DeterministicOverThreadsAndCountsEveryTrial) {
   EXPECT_GT(Canvas::LoadPng(png).width(), 500);
 }
 
-TEST(MetaEval, SavesTheStateAtEveryHandOverToSitAndTheFailedTrialsOnes) {
+TEST(MetaEval, SavesTheStateAtEveryHandOverAndTheFailedTrialsOnes) {
   const TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"});
   const proto::ModelWeights meta = UntrainedMeta(5);
   MetaEvalOptions o;
-  o.trials = 5;
+  constexpr int kTrials = 12;
+  o.trials = kTrials;
   o.seed = 4;
-  o.stochastic = true;  // untrained and sampled: sit is chosen, left and chosen again
+  o.stochastic = true;  // untrained and sampled: each subtask is chosen, left and chosen again
   o.threads = 2;
   std::vector<proto::BankState> all, failed;
   o.sit_starts = &all;
   o.failed_sit_starts = &failed;
+  // The sit's by default; an untrained meta's sits all begin at the spawn (the untrained subtasks
+  // before them fall), so the left turn's hand-overs are the ones counted here.
+  EXPECT_EQ(o.starts_subtask, kSit);
+  o.starts_subtask = kLeftTurn;
   const Json r = EvaluateMeta(c, meta, Untrained(), o);
-  // One state per run of sit, whichever row it came from.
-  const int sit_runs = RunsOf(r, "sit");
+  // One state per hand-over to the left turn, whichever row it came from; a first run, from the
+  // spawn, is none.
+  const int hand_overs = HandOversTo(r, "turn_left");
+  EXPECT_GT(RunsOf(r, "turn_left"), hand_overs) << "no trial began with it: the test cannot tell";
   int failed_trials = 0;
-  ASSERT_GT(sit_runs, 0);
-  EXPECT_EQ(static_cast<int>(all.size()), sit_runs);
+  ASSERT_GT(hand_overs, 0);
+  EXPECT_EQ(static_cast<int>(all.size()), hand_overs);
   for (size_t i = 1; i < all.size(); ++i) EXPECT_LE(all[i - 1].episode(), all[i].episode());
   for (const proto::BankState& b : all) {
-    EXPECT_LT(b.episode(), 5u);
+    EXPECT_LT(b.episode(), static_cast<uint64_t>(kTrials));
     EXPECT_TRUE(b.has_chair());
     EXPECT_EQ(b.q_size(), b.qd_size());
   }
-  failed_trials = static_cast<int>(std::lround(5 * (1.0 - r["success_rate"].get<double>())));
+  failed_trials = static_cast<int>(std::lround(kTrials * (1.0 - r["success_rate"].get<double>())));
   EXPECT_GT(failed_trials, 0);
   EXPECT_LE(failed.size(), all.size());
   // Nothing asked, nothing kept; the statistics do not depend on it.
@@ -403,16 +414,19 @@ TEST(MetaEval, SavesTheHandOversToTheSubtaskItIsAskedFor) {
   o.seed = 4;
   o.stochastic = true;
   o.threads = 2;
-  // One state per run of each subtask, counted from the transition matrices.
+  // One state per hand-over to each subtask (not the first run, from the spawn), counted from
+  // the transition matrices.
   for (int sub : {kLeftTurn, kRightTurn, kWalk}) {
     std::vector<proto::BankState> all;
     o.sit_starts = &all;
     o.starts_subtask = sub;
     const Json r = EvaluateMeta(c, meta, Untrained(), o);
-    const int runs = RunsOf(r, SubtaskName(sub));
+    const int runs = HandOversTo(r, SubtaskName(sub));
     ASSERT_GT(runs, 0) << SubtaskName(sub);
     EXPECT_EQ(static_cast<int>(all.size()), runs) << SubtaskName(sub);
-    EXPECT_NE(runs, RunsOf(r, "sit")) << "the test cannot tell the subtasks apart";
+    EXPECT_NE(runs, HandOversTo(r, "sit")) << "the test cannot tell the subtasks apart";
+    // The walker's hand-backs: its runs from the spawn are not among them.
+    if (sub == kWalk) EXPECT_GT(RunsOf(r, "walk"), runs);
   }
 }
 

@@ -4,10 +4,12 @@
 
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 #include "learner/ppo.h"
 #include "tasks/turn.h"
+#include "tasks/walk.h"
 
 namespace perch {
 namespace {
@@ -254,6 +256,87 @@ TEST(StateBank, KeepPoseRestoresAStateWhereItWasRelativeToItsChair) {
                     {"sit", {{"start", {{"banks", {walk}}, {"prob", 1.0}, {"keep_pose", true}}}}}},
                    "t"),
                ConfigError);
+}
+
+TEST(StateBank, WalkFromHandBacksStartsFromABankStateWithItsOwnHeadingAndTheNearestPhase) {
+  // Hand-backs face anywhere: each state turned by its own angle before it is banked.
+  proto::StateBank bank = SmallWalkBank(1);
+  std::vector<double> yaws;
+  for (int i = 0; i < bank.states_size(); ++i) {
+    proto::BankState* st = bank.mutable_states(i);
+    const Eigen::Quaterniond q0(st->root_quat().w(), st->root_quat().x(), st->root_quat().y(),
+                                st->root_quat().z());
+    const Eigen::Quaterniond q =
+        Eigen::Quaterniond(Eigen::AngleAxisd(0.9 * (i + 1), Eigen::Vector3d::UnitZ())) * q0;
+    st->mutable_root_quat()->set_w(q.w());
+    st->mutable_root_quat()->set_x(q.x());
+    st->mutable_root_quat()->set_y(q.y());
+    st->mutable_root_quat()->set_z(q.z());
+    st->mutable_root_pos()->set_x(3.0 + i);  // far from the origin it is moved to
+    yaws.push_back(RpyFromQuat(q).z());
+  }
+  const std::string path = Temp("walk_handbacks.bin");
+  WriteStateBank(path, bank, false);
+  auto make = [&](double prob) {
+    return MakeTaskHumanoidEnv(TaskEnvConfig::FromJson(
+        {{"task", "walk"},
+         {"chair", "none"},
+         {"walk", {{"stage", "target"}, {"start", {{"banks", {path}}, {"prob", prob}}}}}},
+        "t"));
+  };
+  auto env = make(1.0);
+  const auto& task = dynamic_cast<const WalkTask&>(env->task());
+  std::vector<float> obs(env->spec().obs_dim);
+  std::set<int> drawn;
+  for (int seed = 0; seed < 8; ++seed) {
+    env->Seed(seed);
+    env->Reset(obs.data());
+    ASSERT_TRUE(task.started_from_bank());
+    const HumanoidState& h = env->humanoid_state();
+    int which = -1;
+    for (int i = 0; i < bank.states_size(); ++i) {
+      bool same = true;
+      for (int j = 0; j < 21; ++j) same = same && std::abs(bank.states(i).q(j) - h.q[j]) < 1e-6;
+      if (same) which = i;
+    }
+    ASSERT_GE(which, 0) << seed;
+    drawn.insert(which);
+    // Its own heading, its root over the origin, its height as banked.
+    EXPECT_NEAR(AngleDiff(env->RootRpy().z(), yaws[which]), 0.0, 1e-5) << seed;
+    EXPECT_NEAR(h.root_pos.head<2>().norm(), 0.0, 1e-6) << seed;
+    EXPECT_NEAR(h.root_pos.z(), bank.states(which).root_pos().z(), 1e-5) << seed;
+    // The reference goes on from the clip's nearest pose, under the root.
+    const MotionPose ref = task.ReferenceAt(0);
+    auto dist = [&](const MotionPose& p) {
+      double d = 0.0;
+      for (int j = 0; j < 21; ++j) d += (p.q[j] - h.q[j]) * (p.q[j] - h.q[j]);
+      return d;
+    };
+    for (double t = 0.0; t < task.motion().duration(); t += 0.05) {
+      EXPECT_LE(dist(ref), dist(task.motion().At(t)) + 1e-3) << seed << " t " << t;
+    }
+    EXPECT_NEAR((ref.root_pos - h.root_pos).head<2>().norm(), 0.0, 1e-6) << seed;
+  }
+  EXPECT_GE(drawn.size(), 3u);
+  // prob 0: the clip's first frame, as without a bank.
+  auto never = make(0.0);
+  const auto& plain = dynamic_cast<const WalkTask&>(never->task());
+  never->Seed(1);
+  never->Reset(obs.data());
+  EXPECT_FALSE(plain.started_from_bank());
+  EXPECT_EQ(plain.start_time(), 0.0);
+  // The walk has no chair frame to keep a pose in, and a missing bank names the field.
+  EXPECT_THROW(
+      TaskEnvConfig::FromJson(
+          {{"task", "walk"}, {"walk", {{"start", {{"banks", {path}}, {"keep_pose", true}}}}}}, "t"),
+      ConfigError);
+  try {
+    TaskEnvConfig::FromJson(
+        {{"task", "walk"}, {"walk", {{"start", {{"banks", {"/nonexistent.bin"}}}}}}}, "f.json");
+    ADD_FAILURE() << "no error";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("f.json.walk.start.banks"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace
