@@ -300,6 +300,7 @@ EnvState HumanoidChairEnv::GetState() const {
   EnvState s;
   s.world = world_->GetState();
   s.foot_flags = foot_flags_;
+  s.shown_flags = shown_flags_;
   s.step = step_;
   s.walk_target = walk_target_;
   return s;
@@ -308,6 +309,7 @@ EnvState HumanoidChairEnv::GetState() const {
 void HumanoidChairEnv::SetState(const EnvState& s) {
   world_->SetState(s.world);
   foot_flags_ = s.foot_flags;
+  if (s.shown_flags) shown_flags_ = *s.shown_flags;
   step_ = s.step;
   walk_target_ = s.walk_target;
   AfterPhysics();

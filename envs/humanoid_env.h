@@ -5,6 +5,7 @@
 
 #include <array>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "common/env.h"
@@ -66,6 +67,9 @@ HumanoidState MirrorHumanoidState(const HumanoidState& s, const HumanoidModel& m
 struct EnvState {
   WorldState world;
   std::array<bool, 2> foot_flags{};  // the lagged foot-contact flags
+  // The flags the last observation showed (GetState fills them in; a bank's state has none and
+  // keeps the env's own).
+  std::optional<std::array<bool, 2>> shown_flags;
   int step = 0;
   Eigen::Vector2d walk_target = Eigen::Vector2d::Zero();  // world [m]
 };

@@ -47,7 +47,9 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
                   "sit_retry_value",
                   "abort_walk_min",
                   "turn_begin_value",
-                  "abort_recover_s"},
+                  "abort_recover_s",
+                  "lookahead_delays_s",
+                  "lookahead_sides"},
                  ctx);
   PlannerConfig c;
   GetOptional(j, "pass_m", c.pass_m, ctx);
@@ -75,6 +77,17 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   c.turn_begin_value = c.turn_abort_value;
   GetOptional(j, "turn_begin_value", c.turn_begin_value, ctx);
   GetOptional(j, "abort_recover_s", c.abort_recover_s, ctx);
+  GetOptional(j, "lookahead_delays_s", c.lookahead_delays_s, ctx);
+  GetOptional(j, "lookahead_sides", c.lookahead_sides, ctx);
+  if (c.lookahead_delays_s.size() > 8) {
+    throw ConfigError(ctx + ".lookahead_delays_s: at most 8 delays");
+  }
+  for (double d : c.lookahead_delays_s) {
+    if (!(d > 0 && d <= 3)) throw ConfigError(ctx + ".lookahead_delays_s: each must be in (0, 3] s");
+  }
+  if (c.lookahead_sides && c.side != "short") {
+    throw ConfigError(ctx + ".lookahead_sides: needs side \"short\" (both turns)");
+  }
   if (!(c.abort_recover_s >= 0 && c.abort_recover_s <= 5)) {
     throw ConfigError(ctx + ".abort_recover_s: must be in [0, 5] s");
   }
@@ -153,7 +166,9 @@ Json PlannerConfig::ToJson() const {
               {"sit_retry_value", sit_retry_value},
               {"abort_walk_min", abort_walk_min},
               {"turn_begin_value", turn_begin_value},
-              {"abort_recover_s", abort_recover_s}};
+              {"abort_recover_s", abort_recover_s},
+              {"lookahead_delays_s", lookahead_delays_s},
+              {"lookahead_sides", lookahead_sides}};
 }
 
 Eigen::Vector2d TurnCalibration::DisplacementAt(double rotation) const {

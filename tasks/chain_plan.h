@@ -131,6 +131,14 @@ struct PlannerConfig {
   // After a hand-back, the walker walks straight on for this long before the turn is planned
   // again [s]. 0: plans at once.
   double abort_recover_s = 0.0;
+  // Lookahead (ours, stop 39; tasks/meta_lookahead.h): at every decision where the rules above
+  // switch subtasks, the switch now and the switch delayed by each of these times (the running
+  // subtask goes on meanwhile) are each simulated to the episode's end with the rules above, and
+  // the best outcome is taken [s]. Empty: off.
+  std::vector<double> lookahead_delays_s;
+  // ... and at the first decision, the episode simulated with either turn (side "short" only).
+  bool lookahead_sides = false;
+  bool lookahead() const { return !lookahead_delays_s.empty() || lookahead_sides; }
 
   static PlannerConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;

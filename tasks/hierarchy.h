@@ -154,6 +154,17 @@ class SubtaskPolicies {
   ObsLayout Layout(int id) const;
   bool heading_goal(int id) const { return heading_[id] != nullptr; }
   bool has(int id) const { return runners_[id] != nullptr; }
+  // The subtasks' clocks (Begin's control step and yaw): the only state the policies keep
+  // between steps, saved and restored with an episode (MetaEnv::SaveState).
+  struct Clocks {
+    std::array<int, kNumSubtasks> begin_step{};
+    std::array<double, kNumSubtasks> begin_yaw{};  // [rad]
+  };
+  Clocks clocks() const { return {begin_step_, begin_yaw_}; }
+  void set_clocks(const Clocks& c) {
+    begin_step_ = c.begin_step;
+    begin_yaw_ = c.begin_yaw;
+  }
 
  private:
   // obs_ <- subtask id's observation; a heading-goal turn's clock from its Begin (running) or 0.

@@ -206,6 +206,42 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
   return out;
 }
 
+MetaEnvState MetaEnv::SaveState() const {
+  if (policies_ == nullptr) {
+    throw std::logic_error("meta env: SaveState before the frozen subtask policies were set");
+  }
+  MetaEnvState s;
+  s.env = env_->GetState();
+  s.task_memory = task_->SaveMemory();
+  s.clocks = policies_->clocks();
+  s.rng = rng_;
+  s.active = active_;
+  s.order_pos = order_pos_;
+  s.begun = begun_;
+  s.active_steps = active_steps_;
+  s.contact_run = contact_run_;
+  s.prev_dist = prev_dist_;
+  s.episode = episode_;
+  return s;
+}
+
+void MetaEnv::RestoreState(const MetaEnvState& s) {
+  if (policies_ == nullptr) {
+    throw std::logic_error("meta env: RestoreState before the frozen subtask policies were set");
+  }
+  env_->SetState(s.env);
+  task_->LoadMemory(s.task_memory);
+  policies_->set_clocks(s.clocks);
+  rng_ = s.rng;
+  active_ = s.active;
+  order_pos_ = s.order_pos;
+  begun_ = s.begun;
+  active_steps_ = s.active_steps;
+  contact_run_ = s.contact_run;
+  prev_dist_ = s.prev_dist;
+  episode_ = s.episode;
+}
+
 float MetaEnv::SubtaskValue(int id) const {
   if (policies_ == nullptr) {
     throw std::logic_error("meta env: SubtaskValue before the frozen subtask policies were set");

@@ -40,6 +40,21 @@ struct MetaEpisode {
   double seated_yaw_err_rad = 0.0;
 };
 
+// A meta episode's complete state (the humanoid env's, its task's memory, the subtasks' clocks
+// and the meta env's own): restored into a MetaEnv with the same config and frozen policies it
+// continues exactly as the env that saved it would after restoring it too (tasks/meta_lookahead.h).
+struct MetaEnvState {
+  EnvState env;
+  Json task_memory;
+  SubtaskPolicies::Clocks clocks;
+  Rng rng;
+  int active = 0, order_pos = 0;
+  bool begun = false;
+  int active_steps = 0, contact_run = 0;
+  double prev_dist = 0.0;  // [m]
+  MetaEpisode episode;
+};
+
 class MetaEnv : public Env, public FrozenPolicyEnv {
  public:
   // config.env.task must be sit_chair; its section's `meta` says which subtasks run.
@@ -63,6 +78,11 @@ class MetaEnv : public Env, public FrozenPolicyEnv {
   float SubtaskValue(int id) const;
   // The acting subtask's critic on the current state, on its own clock.
   float ActiveValue() const;
+  // Save / restore the episode (needs the frozen policies). Restoring rebuilds the physics world
+  // (Bullet's contact caches start empty), so two envs restored from one state step identically,
+  // but not bit-identically to the env that saved it had it gone on without a restore.
+  MetaEnvState SaveState() const;
+  void RestoreState(const MetaEnvState& s);
   // Called after every control step (recordings, filmstrips): the env, its step result and the
   // acting subtask.
   std::function<void(const HumanoidChairEnv&, const StepResult&, int active)> on_control_step;

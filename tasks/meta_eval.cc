@@ -11,6 +11,7 @@
 #include "learner/policy.h"
 #include "tasks/meta_env.h"
 #include "tasks/meta_expert.h"
+#include "tasks/meta_lookahead.h"
 #include "tasks/state_bank.h"
 #include "tasks/task_eval.h"
 #include "viz/canvas.h"
@@ -31,6 +32,16 @@ struct TrialResult {
   std::vector<int> sequence;
   std::vector<float> begin_value;            // [run] the subtask's critic when it began
   std::vector<proto::BankState> sit_starts;  // its hand-overs to o.starts_subtask (when asked)
+  LookaheadPlanner::Stats lookahead;           // with the planner's lookahead
+  bool lookahead_agreed = false;  // the outcome is what the last look ahead predicted
+  bool lookahead_not_worse = false;  // ... and not worse than the rules' own from the first one
+};
+
+// Who decides in a trial: a meta policy (runner), the planner, or the planner with lookahead.
+struct Decider {
+  std::unique_ptr<PolicyRunner> runner;
+  std::unique_ptr<MetaPlanner> planner;
+  std::unique_ptr<LookaheadPlanner> lookahead;
 };
 
 uint64_t TrialSeed(uint64_t seed, int trial) {
@@ -39,8 +50,8 @@ uint64_t TrialSeed(uint64_t seed, int trial) {
 
 // One trial on `env` with `runner` (both owned by the calling thread).
 // With a planner, it decides instead of the runner (which is then null).
-TrialResult RunTrial(MetaEnv& env, PolicyRunner* runner, MetaPlanner* planner,
-                     const MetaEvalOptions& o, int trial, std::vector<PoseFrame>* frames) {
+TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int trial,
+                     std::vector<PoseFrame>* frames) {
   const uint64_t s = TrialSeed(o.seed, trial);
   env.Seed(2 * s);
   Rng act_rng(2 * s + 1);
@@ -68,12 +79,15 @@ TrialResult RunTrial(MetaEnv& env, PolicyRunner* runner, MetaPlanner* planner,
     };
   }
   env.Reset(obs.data());
-  if (planner != nullptr) planner->Reset();
+  if (d.planner != nullptr) d.planner->Reset();
+  if (d.lookahead != nullptr) d.lookahead->Reset(2 * s);
   for (int t = 0; t < env.spec().max_episode_steps; ++t) {
-    if (planner != nullptr) {
-      planner->Act(env, action.data());
+    if (d.lookahead != nullptr) {
+      d.lookahead->Act(env, action.data());
+    } else if (d.planner != nullptr) {
+      d.planner->Act(env, action.data());
     } else {
-      runner->Act(obs.data(), act_rng, !o.stochastic, nullptr, action.data());
+      d.runner->Act(obs.data(), act_rng, !o.stochastic, nullptr, action.data());
     }
     const StepResult r = env.Step(action.data(), obs.data());
     if (r.terminated || r.truncated) break;
@@ -92,6 +106,14 @@ TrialResult RunTrial(MetaEnv& env, PolicyRunner* runner, MetaPlanner* planner,
   out.sequence = e.sequence;
   out.begin_value = e.begin_value;
   out.sit_starts = std::move(sit_starts);
+  if (d.lookahead != nullptr) {
+    out.lookahead = d.lookahead->stats();
+    const LookaheadOutcome& p = out.lookahead.predicted;
+    out.lookahead_agreed = out.lookahead.predicted_any && p.success == out.success &&
+                           (p.success ? p.success_step == e.success_step : p.fell == e.fell);
+    out.lookahead_not_worse = out.lookahead.predicted_any &&
+                              !out.lookahead.rules.BetterThan(LookaheadOutcome::Of(e));
+  }
   return out;
 }
 
@@ -185,15 +207,17 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
                       std::to_string(pc.num_choices) + " classes, " + std::to_string(pc.obs_dim) +
                       " inputs)");
   }
-  auto MakeDecider = [&](std::unique_ptr<PolicyRunner>* runner,
-                         std::unique_ptr<MetaPlanner>* planner) {
-    if (planned) {
-      *planner = std::make_unique<MetaPlanner>(o.planner);
-      return;
+  const bool lookahead = planned && o.planner->config.lookahead();
+  auto MakeDecider = [&](Decider* d) {
+    if (lookahead) {
+      d->lookahead = std::make_unique<LookaheadPlanner>(o.planner, config, frozen);
+    } else if (planned) {
+      d->planner = std::make_unique<MetaPlanner>(o.planner);
+    } else {
+      d->runner = std::make_unique<PolicyRunner>(pc, NormalizerConfig());
+      d->runner->LoadWeights(meta);
+      d->runner->set_update_obs_stats(false);
     }
-    *runner = std::make_unique<PolicyRunner>(pc, NormalizerConfig());
-    (*runner)->LoadWeights(meta);
-    (*runner)->set_update_obs_stats(false);
   };
   const int threads = std::clamp(o.threads, 1, o.trials);
   std::vector<TrialResult> results(o.trials);
@@ -204,11 +228,10 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
     try {
       MetaEnv env(config);
       env.SetFrozenPolicies(frozen);
-      std::unique_ptr<PolicyRunner> runner;
-      std::unique_ptr<MetaPlanner> planner;
-      MakeDecider(&runner, &planner);
+      Decider d;
+      MakeDecider(&d);
       for (int i = next++; i < o.trials; i = next++) {
-        results[i] = RunTrial(env, runner.get(), planner.get(), o, i, nullptr);
+        results[i] = RunTrial(env, d, o, i, nullptr);
         successes += results[i].success;
         const int d = ++done;
         if (o.progress) {
@@ -308,6 +331,30 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
          {"decider", planned ? "planner" : "meta policy"}};
   j["handover_values"] = HandoverValues(results);
   if (planned) j["planner"] = o.planner->ToJson();
+  if (lookahead) {
+    // How much looking ahead was done and changed, and whether the simulator was exact (the
+    // outcome is the one the last look ahead predicted).
+    int points = 0, rollouts = 0, changed = 0, predicted = 0, agreed = 0, not_worse = 0;
+    int rules_success = 0;
+    for (const TrialResult& r : results) {
+      points += r.lookahead.points;
+      rollouts += r.lookahead.rollouts;
+      changed += r.lookahead.changed;
+      predicted += r.lookahead.predicted_any;
+      agreed += r.lookahead_agreed;
+      not_worse += r.lookahead_not_worse;
+      rules_success += r.lookahead.predicted_any ? r.lookahead.rules.success : r.success;
+    }
+    j["lookahead"] = {{"points_per_trial", points / n},
+                      {"rollouts_per_trial", rollouts / n},
+                      {"changed_per_trial", changed / n},
+                      {"trials_predicted", predicted},
+                      {"trials_as_predicted", agreed},
+                      {"trials_not_worse_than_rules", not_worse},
+                      // The rules alone on the same trials (from the first look ahead on, with
+                      // the same restores): what looking ahead bought.
+                      {"rules_success_rate", rules_success / n}};
+  }
 
   // Filmstrip material: the first success and the first failure, replayed (trials are
   // deterministic for their seed).
@@ -317,12 +364,11 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
       if (results[i].success != want_success) continue;
       MetaEnv env(config);
       env.SetFrozenPolicies(frozen);
-      std::unique_ptr<PolicyRunner> runner;
-      std::unique_ptr<MetaPlanner> planner;
-      MakeDecider(&runner, &planner);
+      Decider d;
+      MakeDecider(&d);
       out->trial = i;
       out->success = want_success;
-      RunTrial(env, runner.get(), planner.get(), o, i, &out->frames);
+      RunTrial(env, d, o, i, &out->frames);
       return;
     }
   };

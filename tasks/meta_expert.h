@@ -31,6 +31,10 @@ class MetaPlanner {
   void Reset();
   // action[3] = [class index in env.meta().choices, theta rad, dist m].
   void Act(const MetaEnv& env, float* action);
+  // The turn's side (0 left, 1 right), -1 before the first decision; set_side fixes it (the
+  // lookahead tries both, tasks/meta_lookahead.h).
+  int side() const { return side_; }
+  void set_side(int side) { side_ = side; }
 
  private:
   std::shared_ptr<const MetaPlan> plan_;

@@ -157,7 +157,9 @@ TEST(ChainPlan, PlannerConfigIsStrictAndNamesTheField) {
                           Json{{"avoid_front_m", 5.0}}, Json{{"turn_value_min", -1.0}},
                           Json{{"sit_value_early", -0.5}}, Json{{"sit_value_yaw_deg", 0.0}},
                           Json{{"turn_abort_value", -1.0}}, Json{{"value_wait_s", 5.0}},
-                          Json{{"abort_recover_s", -1.0}}, Json{{"sit_retry_value", -1.0}}}) {
+                          Json{{"abort_recover_s", -1.0}}, Json{{"sit_retry_value", -1.0}},
+                          Json{{"lookahead_delays_s", {0.0}}}, Json{{"lookahead_delays_s", {4.0}}},
+                          Json{{"lookahead_sides", true}, {"side", "left"}}}) {
     try {
       PlannerConfig::FromJson(bad, "sit_chair.meta.planner");
       ADD_FAILURE() << "accepted " << bad.dump();
@@ -263,6 +265,43 @@ TEST(ChainPlan, PlanOfTheDeliveredSubtasks) {
   o.planner = std::make_shared<const MetaPlan>(no_turn);
   const Json walked = EvaluateMeta(c, proto::ModelWeights(), frozen, o);
   for (const Json& s : walked["sequences"]) EXPECT_EQ(s["sequence"], "walk");
+}
+
+// The planner with lookahead (tasks/meta_lookahead.h): its simulator is exact (every trial ends
+// as its last look ahead predicted), it looks ahead at the first decision (both turns) and at the
+// hand-overs, and no trial ends worse than the rules alone would have from its first decision
+// (with the same restores: without them the rules' trials differ chaotically).
+TEST(ChainPlan, TheLookaheadIsExactAndDoesAtLeastAsWellAsTheRules) {
+  const TaskEnvConfig c = PlannedMeta(4);
+  const std::vector<FrozenPolicyData> frozen = LoadFrozenPolicies(c);
+  const MetaPlan plan = BuildMetaPlan(c, frozen, c.Section<SitChairTaskConfig>().meta.planner);
+  MetaEvalOptions o;
+  o.trials = 6;
+  o.seed = 3;
+  o.threads = 2;
+  o.planner = std::make_shared<const MetaPlan>(plan);
+  const Json rules = EvaluateMeta(c, proto::ModelWeights(), frozen, o);
+  EXPECT_FALSE(rules.contains("lookahead"));
+  MetaPlan ahead = plan;
+  ahead.config.lookahead_delays_s = {0.5};
+  ahead.config.lookahead_sides = true;
+  o.planner = std::make_shared<const MetaPlan>(ahead);
+  const Json j = EvaluateMeta(c, proto::ModelWeights(), frozen, o);
+  ASSERT_TRUE(j.contains("lookahead"));
+  const Json& la = j["lookahead"];
+  EXPECT_EQ(la["trials_predicted"].get<int>(), 6);
+  EXPECT_EQ(la["trials_as_predicted"].get<int>(), 6);
+  // Both sides at the first decision, and more at the hand-overs.
+  EXPECT_GT(la["rollouts_per_trial"].get<double>(), 2.0);
+  EXPECT_GE(la["points_per_trial"].get<double>(), 1.0);
+  EXPECT_EQ(la["trials_not_worse_than_rules"].get<int>(), 6);
+  EXPECT_GE(j["success_rate"].get<double>(), la["rules_success_rate"].get<double>());
+  EXPECT_EQ(j["planner"]["config"]["lookahead_delays_s"], Json({0.5}));
+  // Deterministic for the seed whatever the threads.
+  o.threads = 1;
+  const Json one = EvaluateMeta(c, proto::ModelWeights(), frozen, o);
+  EXPECT_EQ(one["success_rate"], j["success_rate"]);
+  EXPECT_EQ(one["sequences"], j["sequences"]);
 }
 
 TEST(ChainPlan, ThePlannedChainRecordsWhereEachSitBegan) {

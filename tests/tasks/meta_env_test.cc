@@ -479,5 +479,47 @@ TEST(MetaEnv, LoadsTheConfiguredSubtasksAndTheWalkerWalksToATarget) {
   EXPECT_LE(falls, 3);
 }
 
+// A saved episode restored into a second env goes on exactly as the env that saved it does after
+// restoring it too (the lookahead planner's simulator, tasks/meta_lookahead.h): the same
+// observations, rewards, subtask sequence and record, through hand-overs to a turn and the sit.
+TEST(MetaEnv, ARestoredEpisodeGoesOnAsTheSavingEnvDoes) {
+  TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"}, 1, 4.0);
+  c.MutableSection<SitChairTaskConfig>().meta.period = 10;
+  const std::vector<FrozenPolicyData> p = LoadFrozenPolicies(c);
+  MetaEnv a(c), b(c);
+  a.SetFrozenPolicies(p);
+  b.SetFrozenPolicies(p);
+  std::vector<float> obs_a(57), obs_b(57);
+  a.Seed(5);
+  a.Reset(obs_a.data());
+  b.Seed(99);  // another episode: everything it keeps must be replaced by the restore
+  b.Reset(obs_b.data());
+  std::vector<float> walk{3.0f, 0.2f, 2.0f};
+  for (int t = 0; t < 6; ++t) b.Step(walk.data(), obs_b.data());
+  for (int t = 0; t < 6; ++t) ASSERT_FALSE(a.Step(walk.data(), obs_a.data()).terminated);
+  const MetaEnvState s = a.SaveState();
+  a.RestoreState(s);
+  b.RestoreState(s);
+  // A turn, then the sit; the walker in between.
+  const std::vector<float> classes{0, 0, 0, 3, 3, 2, 2, 2};
+  int compared = 0;
+  for (float cls : classes) {
+    std::vector<float> act{cls, -0.3f, 1.5f};
+    const StepResult ra = a.Step(act.data(), obs_a.data());
+    const StepResult rb = b.Step(act.data(), obs_b.data());
+    ASSERT_EQ(obs_a, obs_b) << "meta step " << compared;
+    ASSERT_EQ(ra.reward, rb.reward);
+    ASSERT_EQ(ra.terminated, rb.terminated);
+    ++compared;
+    if (ra.terminated) break;
+  }
+  EXPECT_GE(compared, 2);
+  EXPECT_EQ(a.episode().sequence, b.episode().sequence);
+  EXPECT_GE(a.episode().sequence.size(), 2u);
+  EXPECT_EQ(a.episode().control_steps, b.episode().control_steps);
+  EXPECT_EQ(a.episode().min_dist_m, b.episode().min_dist_m);
+  EXPECT_EQ(a.active(), b.active());
+}
+
 }  // namespace
 }  // namespace perch
