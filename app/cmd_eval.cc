@@ -179,8 +179,9 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     std::string matrix_png;
     bool planner = false;         // sit_chair: the scripted planner decides (no --model)
     std::string save_sit_starts;  // sit_chair: a bank of the states at every hand-over to sit
-    std::string save_failed_sit_starts;  // ... of the trials that failed
-    std::string hand_overs_to = "sit";   // sit_chair: whose hand-overs those banks hold
+    std::string save_failed_sit_starts;      // ... of the trials that failed
+    std::string hand_overs_to = "sit";       // sit_chair: whose hand-overs those banks hold
+    std::vector<double> lookahead_delays_s;  // sit_chair with a meta policy: its lookahead
     std::string start_bank = "data/banks/walk_end_poses_eval.bin";  // sit_chair: walk starts
     int threads = std::max(1u, std::thread::hardware_concurrency());
   };
@@ -273,6 +274,11 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "write (sit, turn_left, turn_right or walk; a turn's or the walk's bank is for "
                   "its start.banks; the episode's first run is not a hand-over)")
       ->capture_default_str();
+  cmd->add_option("--lookahead-delays-s", o->lookahead_delays_s,
+                  "sit_chair with a meta policy: at each of its switches also simulate the switch "
+                  "delayed by each of these times to the episode's end and take the best "
+                  "(tasks/meta_lookahead.h; the planner's lookahead is in its config) [s]")
+      ->check(CLI::Range(0.001, 3.0));
   cmd->add_option("--start-bank", o->start_bank,
                   "sit_chair: the walk start states (default: the evaluation bank; name the "
                   "training bank when sampling hand-overs to train on)")
@@ -453,6 +459,15 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       // run trained with), walk start states from the evaluation bank (docs/meta.md). The
       // planner is measured on each chair (where the sit's clip starts depends on it).
       auto evaluate_meta = [&](const TaskEnvConfig& on_chair) -> Json {
+        // Refused before any work (the planner's calibration, the trials).
+        if (!o->lookahead_delays_s.empty() && o->planner) {
+          throw ConfigError(
+              "--lookahead-delays-s: for a meta policy; the planner's lookahead is its config's "
+              "sit_chair.meta.planner.lookahead_delays_s");
+        }
+        if (o->lookahead_delays_s.size() > 8) {
+          throw ConfigError("--lookahead-delays-s: at most 8 times");
+        }
         TaskEnvConfig mc = on_chair;
         mc.env.spawn = SpawnConfig();
         mc.env.spawn.zone = chain->zone;
@@ -470,6 +485,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         mo.seed = o->eval.seed;
         mo.stochastic = o->eval.stochastic;
         mo.threads = o->threads;
+        mo.policy_lookahead_delays_s = o->lookahead_delays_s;
         std::vector<proto::BankState> sit_starts, failed_sit_starts;
         // Refuse before the work, as the bank writer would after it.
         for (const std::string* f : {&o->save_sit_starts, &o->save_failed_sit_starts}) {

@@ -3,6 +3,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 #include "common/rng.h"
 #include "tasks/hierarchy.h"
@@ -49,7 +50,8 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
                   "turn_begin_value",
                   "abort_recover_s",
                   "lookahead_delays_s",
-                  "lookahead_sides"},
+                  "lookahead_sides",
+                  "lookahead_straight_s"},
                  ctx);
   PlannerConfig c;
   GetOptional(j, "pass_m", c.pass_m, ctx);
@@ -79,11 +81,14 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "abort_recover_s", c.abort_recover_s, ctx);
   GetOptional(j, "lookahead_delays_s", c.lookahead_delays_s, ctx);
   GetOptional(j, "lookahead_sides", c.lookahead_sides, ctx);
-  if (c.lookahead_delays_s.size() > 8) {
-    throw ConfigError(ctx + ".lookahead_delays_s: at most 8 delays");
-  }
-  for (double d : c.lookahead_delays_s) {
-    if (!(d > 0 && d <= 3)) throw ConfigError(ctx + ".lookahead_delays_s: each must be in (0, 3] s");
+  GetOptional(j, "lookahead_straight_s", c.lookahead_straight_s, ctx);
+  for (const auto& [name, list] : {std::pair<const char*, const std::vector<double>*>{
+                                       "lookahead_delays_s", &c.lookahead_delays_s},
+                                   {"lookahead_straight_s", &c.lookahead_straight_s}}) {
+    if (list->size() > 8) throw ConfigError(ctx + "." + name + ": at most 8 times");
+    for (double d : *list) {
+      if (!(d > 0 && d <= 3)) throw ConfigError(ctx + "." + name + ": each must be in (0, 3] s");
+    }
   }
   if (c.lookahead_sides && c.side != "short") {
     throw ConfigError(ctx + ".lookahead_sides: needs side \"short\" (both turns)");
@@ -168,7 +173,8 @@ Json PlannerConfig::ToJson() const {
               {"turn_begin_value", turn_begin_value},
               {"abort_recover_s", abort_recover_s},
               {"lookahead_delays_s", lookahead_delays_s},
-              {"lookahead_sides", lookahead_sides}};
+              {"lookahead_sides", lookahead_sides},
+              {"lookahead_straight_s", lookahead_straight_s}};
 }
 
 Eigen::Vector2d TurnCalibration::DisplacementAt(double rotation) const {

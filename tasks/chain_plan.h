@@ -138,7 +138,12 @@ struct PlannerConfig {
   std::vector<double> lookahead_delays_s;
   // ... and at the first decision, the episode simulated with either turn (side "short" only).
   bool lookahead_sides = false;
-  bool lookahead() const { return !lookahead_delays_s.empty() || lookahead_sides; }
+  // ... and at the first decision, the walker walking straight on for each of these times before
+  // the rules steer it [s]. Empty: only the rules' steering.
+  std::vector<double> lookahead_straight_s;
+  bool lookahead() const {
+    return !lookahead_delays_s.empty() || lookahead_sides || !lookahead_straight_s.empty();
+  }
 
   static PlannerConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;

@@ -12,6 +12,7 @@
 #include "learner/normalizer.h"
 #include "tasks/hierarchy.h"
 #include "tasks/meta_env.h"
+#include "tasks/meta_lookahead.h"
 #include "tasks/task_eval.h"
 
 namespace perch {
@@ -26,10 +27,38 @@ struct Episode {
   bool success = false;
 };
 
+// The teacher: the planner's rules, or the rules with lookahead when the plan's config asks for
+// it (tasks/meta_lookahead.h; it may restore the env to the state it saved).
+struct Teacher {
+  std::unique_ptr<MetaPlanner> rules;
+  std::unique_ptr<LookaheadPlanner> ahead;
+  Teacher(std::shared_ptr<const MetaPlan> plan, const TaskEnvConfig& config,
+          const std::vector<FrozenPolicyData>& frozen) {
+    if (plan->config.lookahead()) {
+      ahead = std::make_unique<LookaheadPlanner>(plan, config, frozen);
+    } else {
+      rules = std::make_unique<MetaPlanner>(plan);
+    }
+  }
+  void Reset(uint64_t env_seed) {
+    if (ahead) {
+      ahead->Reset(env_seed);
+    } else {
+      rules->Reset();
+    }
+  }
+  void Act(MetaEnv& env, float* label) {
+    if (ahead) {
+      ahead->Act(env, label);
+    } else {
+      rules->Act(env, label);
+    }
+  }
+};
+
 // One episode on `env`: the planner labels every meta step; it also acts with probability
 // `beta`, the clone (`runner`, may be null when beta is 1) otherwise.
-Episode Collect(MetaEnv& env, MetaPlanner& planner, PolicyRunner* runner, double beta,
-                uint64_t seed) {
+Episode Collect(MetaEnv& env, Teacher& planner, PolicyRunner* runner, double beta, uint64_t seed) {
   Episode e;
   env.Seed(2 * seed);
   Rng rng(2 * seed + 1);
@@ -37,7 +66,7 @@ Episode Collect(MetaEnv& env, MetaPlanner& planner, PolicyRunner* runner, double
   std::vector<float> obs(od), label(3), action(3);
   const std::vector<int> ids = env.meta().choice_ids();
   env.Reset(obs.data());
-  planner.Reset();
+  planner.Reset(2 * seed);
   for (int t = 0; t < env.spec().max_episode_steps; ++t) {
     planner.Act(env, label.data());
     e.obs.insert(e.obs.end(), obs.begin(), obs.end());
@@ -121,7 +150,7 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
       try {
         MetaEnv env(config);
         env.SetFrozenPolicies(frozen);
-        MetaPlanner planner(plan);
+        Teacher planner(plan, config, frozen);
         std::unique_ptr<PolicyRunner> runner;
         if (dagger) {
           runner = std::make_unique<PolicyRunner>(pc, norm);

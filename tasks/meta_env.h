@@ -82,6 +82,8 @@ class MetaEnv : public Env, public FrozenPolicyEnv {
   // (Bullet's contact caches start empty), so two envs restored from one state step identically,
   // but not bit-identically to the env that saved it had it gone on without a restore.
   MetaEnvState SaveState() const;
+  // The observation Step last wrote, written again for the current state (after a restore).
+  void Observe(float* obs) const { WriteObservation(obs); }
   void RestoreState(const MetaEnvState& s);
   // Called after every control step (recordings, filmstrips): the env, its step result and the
   // acting subtask.

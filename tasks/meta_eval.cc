@@ -32,8 +32,8 @@ struct TrialResult {
   std::vector<int> sequence;
   std::vector<float> begin_value;            // [run] the subtask's critic when it began
   std::vector<proto::BankState> sit_starts;  // its hand-overs to o.starts_subtask (when asked)
-  LookaheadPlanner::Stats lookahead;           // with the planner's lookahead
-  bool lookahead_agreed = false;  // the outcome is what the last look ahead predicted
+  LookaheadPlanner::Stats lookahead;         // with the planner's lookahead
+  bool lookahead_agreed = false;             // the outcome is what the last look ahead predicted
   bool lookahead_not_worse = false;  // ... and not worse than the rules' own from the first one
 };
 
@@ -111,8 +111,8 @@ TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int tri
     const LookaheadOutcome& p = out.lookahead.predicted;
     out.lookahead_agreed = out.lookahead.predicted_any && p.success == out.success &&
                            (p.success ? p.success_step == e.success_step : p.fell == e.fell);
-    out.lookahead_not_worse = out.lookahead.predicted_any &&
-                              !out.lookahead.rules.BetterThan(LookaheadOutcome::Of(e));
+    out.lookahead_not_worse =
+        out.lookahead.predicted_any && !out.lookahead.rules.BetterThan(LookaheadOutcome::Of(e));
   }
   return out;
 }
@@ -207,10 +207,17 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
                       std::to_string(pc.num_choices) + " classes, " + std::to_string(pc.obs_dim) +
                       " inputs)");
   }
-  const bool lookahead = planned && o.planner->config.lookahead();
+  const bool lookahead =
+      planned ? o.planner->config.lookahead() : !o.policy_lookahead_delays_s.empty();
   auto MakeDecider = [&](Decider* d) {
-    if (lookahead) {
+    if (lookahead && planned) {
       d->lookahead = std::make_unique<LookaheadPlanner>(o.planner, config, frozen);
+    } else if (lookahead) {
+      auto runner = std::make_shared<PolicyRunner>(pc, NormalizerConfig());
+      runner->LoadWeights(meta);
+      runner->set_update_obs_stats(false);
+      d->lookahead =
+          std::make_unique<LookaheadPlanner>(runner, o.policy_lookahead_delays_s, config, frozen);
     } else if (planned) {
       d->planner = std::make_unique<MetaPlanner>(o.planner);
     } else {
@@ -331,6 +338,7 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
          {"decider", planned ? "planner" : "meta policy"}};
   j["handover_values"] = HandoverValues(results);
   if (planned) j["planner"] = o.planner->ToJson();
+  if (!planned && lookahead) j["lookahead_delays_s"] = o.policy_lookahead_delays_s;
   if (lookahead) {
     // How much looking ahead was done and changed, and whether the simulator was exact (the
     // outcome is the one the last look ahead predicted).

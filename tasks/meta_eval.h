@@ -41,6 +41,10 @@ struct MetaEvalOptions {
   // a turn to train the turn on the states the meta hands it, the walk for its hand-backs (the
   // episode's first run, from the spawn, is never a hand-over).
   int starts_subtask = 2;  // kSit (tasks/hierarchy.h)
+  // A meta policy with lookahead (tasks/meta_lookahead.h; `perch eval --lookahead-delays-s`): at
+  // each of its switches, the switch delayed by each of these times is simulated too and the best
+  // outcome taken [s]. Empty: the policy alone. (The planner's lookahead is its config's.)
+  std::vector<double> policy_lookahead_delays_s;
 };
 
 // The control-step frames of one trial, labelled with the acting subtask.

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "learner/policy.h"
+
 namespace perch {
 
 namespace {
@@ -38,14 +40,50 @@ LookaheadOutcome LookaheadOutcome::Of(const MetaEpisode& e) {
   return out;
 }
 
+MetaDecider::MetaDecider(std::shared_ptr<const MetaPlan> plan) : rules_(MetaPlanner(plan)) {}
+
+MetaDecider::MetaDecider(std::shared_ptr<PolicyRunner> policy) : policy_(std::move(policy)) {}
+
+void MetaDecider::Reset() {
+  if (rules_) rules_->Reset();
+}
+
+void MetaDecider::Act(const MetaEnv& env, float* action) {
+  if (rules_) {
+    rules_->Act(env, action);
+    return;
+  }
+  obs_.resize(env.spec().obs_dim);
+  env.Observe(obs_.data());
+  Rng unused(0);  // the mean action draws nothing
+  policy_->Act(obs_.data(), unused, /*deterministic=*/true, nullptr, action);
+}
+
 LookaheadPlanner::LookaheadPlanner(std::shared_ptr<const MetaPlan> plan,
                                    const TaskEnvConfig& config,
                                    const std::vector<FrozenPolicyData>& frozen)
-    : plan_(plan), sim_(std::make_unique<MetaEnv>(config)), base_(plan) {
+    : config_(plan->config), base_(plan) {
+  Init(config, frozen);
+}
+
+LookaheadPlanner::LookaheadPlanner(std::shared_ptr<PolicyRunner> policy,
+                                   const std::vector<double>& delays_s, const TaskEnvConfig& config,
+                                   const std::vector<FrozenPolicyData>& frozen)
+    : base_(std::move(policy)) {
+  config_.lookahead_delays_s = delays_s;
+  Init(config, frozen);
+}
+
+void LookaheadPlanner::Init(const TaskEnvConfig& config,
+                            const std::vector<FrozenPolicyData>& frozen) {
+  sim_ = std::make_unique<MetaEnv>(config);
   sim_->SetFrozenPolicies(frozen);
   const double period_s = sim_->meta().period * sim_->humanoid().spec().control_dt;
-  for (double d : plan_->config.lookahead_delays_s) {
+  for (double d : config_.lookahead_delays_s) {
     delays_.push_back(std::max(1, static_cast<int>(std::lround(d / period_s))));
+  }
+  for (double d : config_.lookahead_straight_s) {
+    straights_.push_back(std::max(1, static_cast<int>(std::lround(d / period_s))));
   }
 }
 
@@ -58,11 +96,19 @@ void LookaheadPlanner::Reset(uint64_t seed) {
   base_.Reset();
   meta_step_ = 0;
   hold_until_ = 0;
+  straight_until_ = 0;
   stats_ = Stats();
 }
 
-void LookaheadPlanner::RuleStep(MetaEnv& env, MetaPlanner& planner, bool hold, float* action) {
-  const MetaPlanner before = planner;
+void LookaheadPlanner::Straight(const MetaEnv& env, float* action) const {
+  if (env.active() != kWalk) return;
+  action[1] = 0.0f;  // ahead, as MetaPlanner keeps the target while not walking
+  action[2] = static_cast<float>(config_.lookahead_m);
+}
+
+void LookaheadPlanner::RuleStep(MetaEnv& env, MetaDecider& planner, bool hold, bool straight,
+                                float* action) const {
+  const MetaDecider before = planner;
   planner.Act(env, action);
   if (before.side() < 0 || Switches(env, action)) {
     env.RestoreState(env.SaveState());
@@ -70,21 +116,23 @@ void LookaheadPlanner::RuleStep(MetaEnv& env, MetaPlanner& planner, bool hold, f
     planner.Act(env, action);
   }
   if (hold) action[0] = static_cast<float>(ClassOf(env, env.active()));
+  if (straight) Straight(env, action);
 }
 
-LookaheadOutcome LookaheadPlanner::Rollout(const MetaEnvState& s, const MetaPlanner& before,
-                                           int side, int hold_steps) {
+LookaheadOutcome LookaheadPlanner::Rollout(const MetaEnvState& s, const MetaDecider& before,
+                                           int side, int hold_steps, int straight_steps) {
   ++stats_.rollouts;
   sim_->RestoreState(s);
-  MetaPlanner p = before;
+  MetaDecider p = before;
   if (side >= 0) p.set_side(side);
   std::vector<float> obs(sim_->spec().obs_dim), a(sim_->spec().act_dim);
   p.Act(*sim_, a.data());
   if (hold_steps > 0) a[0] = static_cast<float>(ClassOf(*sim_, sim_->active()));
+  if (straight_steps > 0) Straight(*sim_, a.data());
   for (int k = 1;; ++k) {
     const StepResult r = sim_->Step(a.data(), obs.data());
     if (r.terminated || r.truncated || sim_->episode().success_step >= 0) break;
-    RuleStep(*sim_, p, k < hold_steps, a.data());
+    RuleStep(*sim_, p, k < hold_steps, k < straight_steps, a.data());
   }
   return LookaheadOutcome::Of(sim_->episode());
 }
@@ -92,12 +140,14 @@ LookaheadOutcome LookaheadPlanner::Rollout(const MetaEnvState& s, const MetaPlan
 void LookaheadPlanner::Act(MetaEnv& env, float* action) {
   const int step = meta_step_++;
   const bool hold = step < hold_until_;
-  const MetaPlanner before = base_;
+  const bool straight = step < straight_until_;
+  const MetaDecider before = base_;
   base_.Act(env, action);
   const bool first = before.side() < 0;
   const bool switches = Switches(env, action);
   if (!first && !switches) {
     if (hold) action[0] = static_cast<float>(ClassOf(env, env.active()));
+    if (straight) Straight(env, action);
     return;
   }
   // As RuleStep: save and restore, so that what follows is what a rollout from here simulates.
@@ -105,34 +155,40 @@ void LookaheadPlanner::Act(MetaEnv& env, float* action) {
   env.RestoreState(s);
   base_ = before;
   base_.Act(env, action);
-  if (hold) {
-    action[0] = static_cast<float>(ClassOf(env, env.active()));
+  if (hold || straight) {
+    if (hold) action[0] = static_cast<float>(ClassOf(env, env.active()));
+    if (straight) Straight(env, action);
     return;
   }
   std::vector<int> sides{-1};
-  if (first && plan_->config.lookahead_sides) sides = {base_.side(), 1 - base_.side()};
+  if (first && config_.lookahead_sides) sides = {base_.side(), 1 - base_.side()};
   std::vector<int> holds{0};
   if (Switches(env, action)) holds.insert(holds.end(), delays_.begin(), delays_.end());
-  if (sides.size() * holds.size() < 2) return;
+  std::vector<int> straights{0};
+  if (first) straights.insert(straights.end(), straights_.begin(), straights_.end());
+  if (sides.size() * holds.size() * straights.size() < 2) return;
   ++stats_.points;
-  int best_side = sides[0], best_hold = 0;
+  int best_side = sides[0], best_hold = 0, best_straight = 0;
   LookaheadOutcome best;
   bool have = false;
   for (int side : sides) {
-    for (int h : holds) {
-      const LookaheadOutcome o = Rollout(s, before, side, h);
-      if (!stats_.predicted_any && !have) stats_.rules = o;
-      if (!have || o.BetterThan(best)) {
-        best = o;
-        best_side = side;
-        best_hold = h;
-        have = true;
+    for (int st : straights) {
+      for (int h : holds) {
+        const LookaheadOutcome o = Rollout(s, before, side, h, st);
+        if (!stats_.predicted_any && !have) stats_.rules = o;
+        if (!have || o.BetterThan(best)) {
+          best = o;
+          best_side = side;
+          best_hold = h;
+          best_straight = st;
+          have = true;
+        }
       }
     }
   }
   stats_.predicted_any = true;
   stats_.predicted = best;
-  if (best_side != sides[0] || best_hold != 0) ++stats_.changed;
+  if (best_side != sides[0] || best_hold != 0 || best_straight != 0) ++stats_.changed;
   if (best_side >= 0 && best_side != base_.side()) {
     base_ = before;
     base_.set_side(best_side);
@@ -141,6 +197,10 @@ void LookaheadPlanner::Act(MetaEnv& env, float* action) {
   if (best_hold > 0) {
     hold_until_ = step + best_hold;
     action[0] = static_cast<float>(ClassOf(env, env.active()));
+  }
+  if (best_straight > 0) {
+    straight_until_ = step + best_straight;
+    Straight(env, action);
   }
 }
 

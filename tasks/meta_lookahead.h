@@ -13,6 +13,7 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "tasks/meta_env.h"
@@ -31,10 +32,37 @@ struct LookaheadOutcome {
   static LookaheadOutcome Of(const MetaEpisode& e);
 };
 
+class PolicyRunner;
+
+// What the lookahead improves on: the planner's rules, or a meta policy acting on the meta
+// observation (its mean action; a policy has no state of its own to copy).
+class MetaDecider {
+ public:
+  explicit MetaDecider(std::shared_ptr<const MetaPlan> plan);
+  explicit MetaDecider(std::shared_ptr<PolicyRunner> policy);
+  void Reset();
+  void Act(const MetaEnv& env, float* action);
+  // The rules' turn side (-1 before their first decision); a policy has none to choose (0).
+  int side() const { return rules_ ? rules_->side() : 0; }
+  void set_side(int side) {
+    if (rules_) rules_->set_side(side);
+  }
+
+ private:
+  std::optional<MetaPlanner> rules_;
+  std::shared_ptr<PolicyRunner> policy_;
+  std::vector<float> obs_;
+};
+
 class LookaheadPlanner {
  public:
+  // The planner's rules improved as its config's lookahead_* fields say.
   LookaheadPlanner(std::shared_ptr<const MetaPlan> plan, const TaskEnvConfig& config,
                    const std::vector<FrozenPolicyData>& frozen);
+  // A meta policy improved by delaying its switches by each of `delays_s` (no sides: the policy
+  // picks its turn itself).
+  LookaheadPlanner(std::shared_ptr<PolicyRunner> policy, const std::vector<double>& delays_s,
+                   const TaskEnvConfig& config, const std::vector<FrozenPolicyData>& frozen);
   ~LookaheadPlanner();
   // After env.Seed(seed) and env.Reset: the simulator is seeded and reset alike (the same spawn
   // and chair).
@@ -59,15 +87,20 @@ class LookaheadPlanner {
   // One decision of the rules on `env` as the acting env and every rollout make it: at a switch
   // (or the first decision) the env's state is saved and restored first. `hold`: the running
   // subtask goes on whatever the rules say.
-  static void RuleStep(MetaEnv& env, MetaPlanner& planner, bool hold, float* action);
-  LookaheadOutcome Rollout(const MetaEnvState& s, const MetaPlanner& before, int side,
-                           int hold_steps);
-  std::shared_ptr<const MetaPlan> plan_;
+  // `straight`: the walker's target is straight ahead instead (the first decision's alternatives).
+  void RuleStep(MetaEnv& env, MetaDecider& planner, bool hold, bool straight, float* action) const;
+  LookaheadOutcome Rollout(const MetaEnvState& s, const MetaDecider& before, int side,
+                           int hold_steps, int straight_steps);
+  void Straight(const MetaEnv& env, float* action) const;
+  void Init(const TaskEnvConfig& config, const std::vector<FrozenPolicyData>& frozen);
+  PlannerConfig config_;  // the lookahead_* fields and lookahead_m
   std::unique_ptr<MetaEnv> sim_;
-  MetaPlanner base_;
-  std::vector<int> delays_;  // [meta steps], each > 0
+  MetaDecider base_;
+  std::vector<int> delays_;     // [meta steps], each > 0
+  std::vector<int> straights_;  // [meta steps], each > 0
   int meta_step_ = 0;
-  int hold_until_ = 0;  // the running subtask goes on while meta_step_ < hold_until_
+  int hold_until_ = 0;      // the running subtask goes on while meta_step_ < hold_until_
+  int straight_until_ = 0;  // the walker walks straight on while meta_step_ < straight_until_
   Stats stats_;
 };
 

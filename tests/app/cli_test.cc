@@ -227,6 +227,31 @@ TEST_F(CliTest, MetaEvalSavesItsHandOversToSitAsABankTheSitStartsFrom) {
   EXPECT_EQ(std::filesystem::file_size(bank), size);
 }
 
+// The meta policy with lookahead (--lookahead-delays-s): its JSON says how much it looked ahead
+// and that the simulator was exact; the planner's lookahead is its config's, so the flag is
+// refused with --planner, and a bad delay is refused by name.
+TEST_F(CliTest, MetaEvalLooksAheadForAMetaPolicyOnlyWhenAsked) {
+  const std::string src = PERCH_SOURCE_DIR;
+  Result r = Perch("eval --task sit_chair --planner --config " + src +
+                   "/configs/meta_zone1_plan5_30hz.json --trials 2 --lookahead-delays-s 0.3");
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "--lookahead-delays-s: for a meta policy")) << r.out;
+  r = Perch("eval --task sit_chair --model " + src +
+            "/models/sit_chair/policy.bin --trials 2 --lookahead-delays-s -1");
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "--lookahead-delays-s")) << r.out;
+  r = Perch("eval --task sit_chair --model " + src +
+                "/models/sit_chair/policy.bin --zone 1 --trials 2 --seed 7 --threads 2 --json "
+                "--lookahead-delays-s 0.5",
+            false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Json j = Json::parse(r.out);
+  EXPECT_EQ(j["lookahead_delays_s"], Json({0.5}));
+  EXPECT_EQ(j["lookahead"]["trials_as_predicted"].get<int>(),
+            j["lookahead"]["trials_predicted"].get<int>());
+  EXPECT_GE(j["lookahead"]["rollouts_per_trial"].get<double>(), 2.0);
+}
+
 TEST_F(CliTest, MetaEvalSavesTheHandOversToATurnOrTheWalkerAsABankTheyStartFrom) {
   const std::string src = PERCH_SOURCE_DIR;
   const std::string bank = ::testing::TempDir() + "perch_plan_turn_starts.bin";

@@ -479,6 +479,38 @@ TEST(MetaEnv, LoadsTheConfiguredSubtasksAndTheWalkerWalksToATarget) {
   EXPECT_LE(falls, 3);
 }
 
+// The delivered meta policy with lookahead (perch eval --lookahead-delays-s): at each of its
+// switches the delayed switches are simulated too; the simulator is exact (every trial ends as
+// its last look ahead predicted) and no trial ends worse than the policy alone would have from
+// its first switch on.
+TEST(MetaEval, TheMetaPolicyWithLookaheadIsExactAndNoWorseThanAlone) {
+  const std::string model = ResolveProjectPath("models/sit_chair/policy.bin");
+  TaskEnvConfig c = TaskEnvConfig::FromJson(SavedConfig(model)["env"], "saved");
+  c.env.spawn = SpawnConfig();
+  c.env.spawn.zone = 1;
+  const std::vector<FrozenPolicyData> frozen = FrozenPoliciesIn(model);
+  ASSERT_EQ(frozen.size(), 4u);
+  const proto::ModelWeights meta = LoadModelFile(model);
+  MetaEvalOptions o;
+  o.trials = 4;
+  o.seed = 7;
+  o.threads = 2;
+  const Json alone = EvaluateMeta(c, meta, frozen, o);
+  EXPECT_FALSE(alone.contains("lookahead"));
+  o.policy_lookahead_delays_s = {0.3, 0.8};
+  const Json j = EvaluateMeta(c, meta, frozen, o);
+  ASSERT_TRUE(j.contains("lookahead"));
+  const Json& la = j["lookahead"];
+  EXPECT_EQ(la["trials_predicted"].get<int>(), 4);  // every trial switches at least once
+  EXPECT_EQ(la["trials_as_predicted"].get<int>(), 4);
+  EXPECT_EQ(la["trials_not_worse_than_rules"].get<int>(), 4);
+  // Three rollouts (now, +0.3 s, +0.8 s) at each switch.
+  EXPECT_NEAR(la["rollouts_per_trial"].get<double>(), 3 * la["points_per_trial"].get<double>(),
+              1e-9);
+  EXPECT_EQ(j["lookahead_delays_s"], Json({0.3, 0.8}));
+  EXPECT_EQ(j["decider"], "meta policy");
+}
+
 // A saved episode restored into a second env goes on exactly as the env that saved it does after
 // restoring it too (the lookahead planner's simulator, tasks/meta_lookahead.h): the same
 // observations, rewards, subtask sequence and record, through hand-overs to a turn and the sit.
