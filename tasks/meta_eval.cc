@@ -48,8 +48,7 @@ uint64_t TrialSeed(uint64_t seed, int trial) {
   return seed * 1000003ULL + static_cast<uint64_t>(trial);
 }
 
-// One trial on `env` with `runner` (both owned by the calling thread).
-// With a planner, it decides instead of the runner (which is then null).
+// One trial on `env` decided by `d` (both owned by the calling thread).
 TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int trial,
                      std::vector<PoseFrame>* frames) {
   const uint64_t s = TrialSeed(o.seed, trial);
@@ -209,6 +208,10 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
   }
   const bool lookahead =
       planned ? o.planner->config.lookahead() : !o.policy_lookahead_delays_s.empty();
+  if (lookahead && !planned && o.stochastic) {
+    // Its rollouts take the policy's mean action: a sampling policy would not do what they show.
+    throw ConfigError("eval: a meta policy's lookahead needs its mean action (no --stochastic)");
+  }
   auto MakeDecider = [&](Decider* d) {
     if (lookahead && planned) {
       d->lookahead = std::make_unique<LookaheadPlanner>(o.planner, config, frozen);
@@ -235,10 +238,10 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
     try {
       MetaEnv env(config);
       env.SetFrozenPolicies(frozen);
-      Decider d;
-      MakeDecider(&d);
+      Decider decider;
+      MakeDecider(&decider);
       for (int i = next++; i < o.trials; i = next++) {
-        results[i] = RunTrial(env, d, o, i, nullptr);
+        results[i] = RunTrial(env, decider, o, i, nullptr);
         successes += results[i].success;
         const int d = ++done;
         if (o.progress) {

@@ -229,7 +229,7 @@ TEST_F(CliTest, MetaEvalSavesItsHandOversToSitAsABankTheSitStartsFrom) {
 
 // The meta policy with lookahead (--lookahead-delays-s): its JSON says how much it looked ahead
 // and that the simulator was exact; the planner's lookahead is its config's, so the flag is
-// refused with --planner, and a bad delay is refused by name.
+// refused with --planner; a bad delay and a sampling policy are refused by name.
 TEST_F(CliTest, MetaEvalLooksAheadForAMetaPolicyOnlyWhenAsked) {
   const std::string src = PERCH_SOURCE_DIR;
   Result r = Perch("eval --task sit_chair --planner --config " + src +
@@ -240,6 +240,11 @@ TEST_F(CliTest, MetaEvalLooksAheadForAMetaPolicyOnlyWhenAsked) {
             "/models/sit_chair/policy.bin --trials 2 --lookahead-delays-s -1");
   EXPECT_NE(r.code, 0);
   EXPECT_TRUE(Has(r.out, "--lookahead-delays-s")) << r.out;
+  // Its rollouts take the policy's mean action, so a sampling policy is refused.
+  r = Perch("eval --task sit_chair --model " + src +
+            "/models/sit_chair/policy.bin --trials 2 --stochastic --lookahead-delays-s 0.5");
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "needs its mean action")) << r.out;
   r = Perch("eval --task sit_chair --model " + src +
                 "/models/sit_chair/policy.bin --zone 1 --trials 2 --seed 7 --threads 2 --json "
                 "--lookahead-delays-s 0.5",
