@@ -179,9 +179,12 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     std::string matrix_png;
     bool planner = false;         // sit_chair: the scripted planner decides (no --model)
     std::string save_sit_starts;  // sit_chair: a bank of the states at every hand-over to sit
-    std::string save_failed_sit_starts;      // ... of the trials that failed
-    std::string hand_overs_to = "sit";       // sit_chair: whose hand-overs those banks hold
-    std::vector<double> lookahead_delays_s;  // sit_chair with a meta policy: its lookahead
+    std::string save_failed_sit_starts;        // ... of the trials that failed
+    std::string hand_overs_to = "sit";         // sit_chair: whose hand-overs those banks hold
+    std::vector<double> lookahead_delays_s;    // sit_chair with a meta policy: its lookahead
+    bool lookahead_sides = false;              // ... with the other turn at each turn switch
+    std::vector<double> lookahead_straight_s;  // ... with straight-on starts [s]
+    std::string lookahead_rank = "sooner";     // ... and how it ranks two successes
     std::string start_bank = "data/banks/walk_end_poses_eval.bin";  // sit_chair: walk starts
     int threads = std::max(1u, std::thread::hardware_concurrency());
   };
@@ -279,6 +282,19 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "delayed by each of these times to the episode's end and take the best "
                   "(tasks/meta_lookahead.h; the planner's lookahead is in its config) [s]")
       ->check(CLI::Range(0.001, 3.0));
+  cmd->add_flag("--lookahead-sides", o->lookahead_sides,
+                "sit_chair with a meta policy: at each of its switches into a turn also simulate "
+                "the other turn (tasks/meta_lookahead.h)");
+  cmd->add_option("--lookahead-straight-s", o->lookahead_straight_s,
+                  "sit_chair with a meta policy: at its first step also simulate the walker "
+                  "walking straight on for each of these times before the policy steers [s]")
+      ->check(CLI::Range(0.001, 3.0));
+  cmd->add_option("--lookahead-rank", o->lookahead_rank,
+                  "sit_chair with a meta policy's lookahead: which of two successful "
+                  "outcomes is better, the sooner or the nearer (smaller minimum pelvis - seat "
+                  "distance); the planner's is its config's lookahead_rank")
+      ->check(CLI::IsMember({"sooner", "nearer"}))
+      ->capture_default_str();
   cmd->add_option("--start-bank", o->start_bank,
                   "sit_chair: the walk start states (default: the evaluation bank; name the "
                   "training bank when sampling hand-overs to train on)")
@@ -460,13 +476,21 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       // planner is measured on each chair (where the sit's clip starts depends on it).
       auto evaluate_meta = [&](const TaskEnvConfig& on_chair) -> Json {
         // Refused before any work (the planner's calibration, the trials).
-        if (!o->lookahead_delays_s.empty() && o->planner) {
+        const bool look = !o->lookahead_delays_s.empty() || o->lookahead_sides ||
+                          !o->lookahead_straight_s.empty();
+        if (o->planner && (look || o->lookahead_rank != "sooner")) {
           throw ConfigError(
-              "--lookahead-delays-s: for a meta policy; the planner's lookahead is its config's "
-              "sit_chair.meta.planner.lookahead_delays_s");
+              "--lookahead-delays-s / --lookahead-sides / --lookahead-straight-s / "
+              "--lookahead-rank: for a meta policy; the planner's lookahead is its config's "
+              "sit_chair.meta.planner.lookahead_*");
         }
-        if (o->lookahead_delays_s.size() > 8) {
-          throw ConfigError("--lookahead-delays-s: at most 8 times");
+        if (o->lookahead_rank != "sooner" && !look) {
+          throw ConfigError(
+              "--lookahead-rank: only with a lookahead (--lookahead-delays-s, --lookahead-sides "
+              "or --lookahead-straight-s)");
+        }
+        if (o->lookahead_delays_s.size() > 8 || o->lookahead_straight_s.size() > 8) {
+          throw ConfigError("--lookahead-delays-s / --lookahead-straight-s: at most 8 times");
         }
         TaskEnvConfig mc = on_chair;
         mc.env.spawn = SpawnConfig();
@@ -485,7 +509,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         mo.seed = o->eval.seed;
         mo.stochastic = o->eval.stochastic;
         mo.threads = o->threads;
-        mo.policy_lookahead_delays_s = o->lookahead_delays_s;
+        mo.policy_lookahead.lookahead_delays_s = o->lookahead_delays_s;
+        mo.policy_lookahead.lookahead_sides = o->lookahead_sides;
+        mo.policy_lookahead.lookahead_straight_s = o->lookahead_straight_s;
+        mo.policy_lookahead.lookahead_rank = o->lookahead_rank;
         std::vector<proto::BankState> sit_starts, failed_sit_starts;
         // Refuse before the work, as the bank writer would after it.
         for (const std::string* f : {&o->save_sit_starts, &o->save_failed_sit_starts}) {

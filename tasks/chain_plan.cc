@@ -51,7 +51,8 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
                   "abort_recover_s",
                   "lookahead_delays_s",
                   "lookahead_sides",
-                  "lookahead_straight_s"},
+                  "lookahead_straight_s",
+                  "lookahead_rank"},
                  ctx);
   PlannerConfig c;
   GetOptional(j, "pass_m", c.pass_m, ctx);
@@ -82,6 +83,11 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "lookahead_delays_s", c.lookahead_delays_s, ctx);
   GetOptional(j, "lookahead_sides", c.lookahead_sides, ctx);
   GetOptional(j, "lookahead_straight_s", c.lookahead_straight_s, ctx);
+  GetOptional(j, "lookahead_rank", c.lookahead_rank, ctx);
+  if (c.lookahead_rank != "sooner" && c.lookahead_rank != "nearer") {
+    throw ConfigError(ctx + ".lookahead_rank: must be \"sooner\" or \"nearer\", not \"" +
+                      c.lookahead_rank + "\"");
+  }
   for (const auto& [name, list] : {std::pair<const char*, const std::vector<double>*>{
                                        "lookahead_delays_s", &c.lookahead_delays_s},
                                    {"lookahead_straight_s", &c.lookahead_straight_s}}) {
@@ -174,7 +180,8 @@ Json PlannerConfig::ToJson() const {
               {"abort_recover_s", abort_recover_s},
               {"lookahead_delays_s", lookahead_delays_s},
               {"lookahead_sides", lookahead_sides},
-              {"lookahead_straight_s", lookahead_straight_s}};
+              {"lookahead_straight_s", lookahead_straight_s},
+              {"lookahead_rank", lookahead_rank}};
 }
 
 Eigen::Vector2d TurnCalibration::DisplacementAt(double rotation) const {

@@ -141,6 +141,10 @@ struct PlannerConfig {
   // ... and at the first decision, the walker walking straight on for each of these times before
   // the rules steer it [s]. Empty: only the rules' steering.
   std::vector<double> lookahead_straight_s;
+  // How two successful outcomes are ranked: "sooner" (the earlier success) or "nearer" (the
+  // smaller minimum pelvis - seat distance, the paper's second metric; then sooner). Failures
+  // rank alike either way: no fall, then nearer.
+  std::string lookahead_rank = "sooner";
   bool lookahead() const {
     return !lookahead_delays_s.empty() || lookahead_sides || !lookahead_straight_s.empty();
   }

@@ -179,6 +179,7 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
       episode_.success_step = episode_.control_steps;
       const Eigen::Vector3d d = env_->PelvisPosition() - env_->SeatTargetWorld();
       episode_.seated_pos_err_m = d.head<2>().norm();
+      episode_.seated_height_m = d.z();
       episode_.seated_yaw_err_rad =
           std::abs(AngleDiff(env_->RootRpy().z(), config_.env.chair_placement.yaw));
       out.success = true;

@@ -34,9 +34,11 @@ struct MetaEpisode {
   bool fell = false;        // early termination
   int control_steps = 0;
   double spawn_theta = 0.0;  // azimuth of the spawn around the zone centre [rad]
-  // At success: pelvis horizontal distance to the seat target [m] and root yaw error to the
-  // chair's facing direction [rad].
+  // At success: pelvis horizontal distance to the seat target [m], the pelvis's height above it
+  // [m] (the pelvis capsule's radius, 0.09 m, keeps it well above the seat surface) and root yaw
+  // error to the chair's facing direction [rad].
   double seated_pos_err_m = 0.0;
+  double seated_height_m = 0.0;
   double seated_yaw_err_rad = 0.0;
 };
 

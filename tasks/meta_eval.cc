@@ -27,7 +27,7 @@ struct TrialResult {
   bool fell = false;
   double min_dist_m = 0.0;
   double time_to_sit_s = 0.0;
-  double pos_err_m = 0.0, yaw_err_rad = 0.0;
+  double pos_err_m = 0.0, height_m = 0.0, yaw_err_rad = 0.0;
   double spawn_theta = 0.0;
   std::vector<int> sequence;
   std::vector<float> begin_value;            // [run] the subtask's critic when it began
@@ -100,6 +100,7 @@ TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int tri
   out.min_dist_m = e.min_dist_m;
   out.time_to_sit_s = out.success ? e.success_step * dt : 0.0;
   out.pos_err_m = e.seated_pos_err_m;
+  out.height_m = e.seated_height_m;
   out.yaw_err_rad = e.seated_yaw_err_rad;
   out.spawn_theta = e.spawn_theta;
   out.sequence = e.sequence;
@@ -110,8 +111,8 @@ TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int tri
     const LookaheadOutcome& p = out.lookahead.predicted;
     out.lookahead_agreed = out.lookahead.predicted_any && p.success == out.success &&
                            (p.success ? p.success_step == e.success_step : p.fell == e.fell);
-    out.lookahead_not_worse =
-        out.lookahead.predicted_any && !out.lookahead.rules.BetterThan(LookaheadOutcome::Of(e));
+    out.lookahead_not_worse = out.lookahead.predicted_any &&
+                              !d.lookahead->Better(out.lookahead.rules, LookaheadOutcome::Of(e));
   }
   return out;
 }
@@ -206,8 +207,7 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
                       std::to_string(pc.num_choices) + " classes, " + std::to_string(pc.obs_dim) +
                       " inputs)");
   }
-  const bool lookahead =
-      planned ? o.planner->config.lookahead() : !o.policy_lookahead_delays_s.empty();
+  const bool lookahead = planned ? o.planner->config.lookahead() : o.policy_lookahead.lookahead();
   if (lookahead && !planned && o.stochastic) {
     // Its rollouts take the policy's mean action: a sampling policy would not do what they show.
     throw ConfigError("eval: a meta policy's lookahead needs its mean action (no --stochastic)");
@@ -219,8 +219,7 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
       auto runner = std::make_shared<PolicyRunner>(pc, NormalizerConfig());
       runner->LoadWeights(meta);
       runner->set_update_obs_stats(false);
-      d->lookahead =
-          std::make_unique<LookaheadPlanner>(runner, o.policy_lookahead_delays_s, config, frozen);
+      d->lookahead = std::make_unique<LookaheadPlanner>(runner, o.policy_lookahead, config, frozen);
     } else if (planned) {
       d->planner = std::make_unique<MetaPlanner>(o.planner);
     } else {
@@ -262,7 +261,7 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
 
   // Aggregates, in trial order (independent of the threads).
   int n_success = 0, n_fell = 0;
-  std::vector<double> min_d, t_sit, pos_cm, yaw_deg;
+  std::vector<double> min_d, t_sit, pos_cm, yaw_deg, height_cm, min_d_success, min_d_failure;
   // Transition counts per start side (the chair faces +x: theta > 0 is its left, +y).
   std::map<std::string, std::map<std::string, std::map<std::string, int>>> trans;
   std::map<std::string, int> seq_count;
@@ -281,9 +280,11 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
     n_success += r.success;
     n_fell += r.fell;
     min_d.push_back(r.min_dist_m);
+    (r.success ? min_d_success : min_d_failure).push_back(r.min_dist_m);
     if (r.success) {
       t_sit.push_back(r.time_to_sit_s);
       pos_cm.push_back(100.0 * r.pos_err_m);
+      height_cm.push_back(100.0 * r.height_m);
       yaw_deg.push_back(r.yaw_err_rad * 180.0 / M_PI);
     }
     const std::string side = r.spawn_theta >= 0 ? "left" : "right";
@@ -332,6 +333,9 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
          {"min_dist_std_m", StdOf(min_d)},
          {"fall_rate", n_fell / n},
          {"seated_position_error_cm_mean", MeanOf(pos_cm)},
+         {"seated_height_cm_mean", MeanOf(height_cm)},
+         {"min_dist_success_mean_m", MeanOf(min_d_success)},
+         {"min_dist_failure_mean_m", MeanOf(min_d_failure)},
          {"seated_orientation_error_deg_mean", MeanOf(yaw_deg)},
          {"time_to_sit_s_mean", MeanOf(t_sit)},
          {"by_side", sides},
@@ -341,7 +345,13 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
          {"decider", planned ? "planner" : "meta policy"}};
   j["handover_values"] = HandoverValues(results);
   if (planned) j["planner"] = o.planner->ToJson();
-  if (!planned && lookahead) j["lookahead_delays_s"] = o.policy_lookahead_delays_s;
+  if (!planned && lookahead) {
+    const PlannerConfig& la = o.policy_lookahead;
+    j["lookahead_delays_s"] = la.lookahead_delays_s;
+    j["lookahead_sides"] = la.lookahead_sides;
+    j["lookahead_straight_s"] = la.lookahead_straight_s;
+    j["lookahead_rank"] = la.lookahead_rank;
+  }
   if (lookahead) {
     // How much looking ahead was done and changed, and whether the simulator was exact (the
     // outcome is the one the last look ahead predicted).

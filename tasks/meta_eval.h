@@ -15,6 +15,7 @@
 #include "common/json_util.h"
 #include "common/proto/bank.pb.h"
 #include "common/proto/model.pb.h"
+#include "tasks/chain_plan.h"
 #include "tasks/task_env.h"
 #include "viz/filmstrip.h"
 
@@ -41,10 +42,11 @@ struct MetaEvalOptions {
   // a turn to train the turn on the states the meta hands it, the walk for its hand-backs (the
   // episode's first run, from the spawn, is never a hand-over).
   int starts_subtask = 2;  // kSit (tasks/hierarchy.h)
-  // A meta policy with lookahead (tasks/meta_lookahead.h; `perch eval --lookahead-delays-s`): at
-  // each of its switches, the switch delayed by each of these times is simulated too and the best
-  // outcome taken [s]. Empty: the policy alone. (The planner's lookahead is its config's.)
-  std::vector<double> policy_lookahead_delays_s;
+  // A meta policy with lookahead (tasks/meta_lookahead.h; `perch eval --lookahead-*`): only the
+  // lookahead_* fields count (delays at each of its switches, the other turn at each switch into
+  // a turn, straight-on walking at the start, the rank). None set: the policy alone. (The
+  // planner's lookahead is its config's.)
+  PlannerConfig policy_lookahead;
 };
 
 // The control-step frames of one trial, labelled with the acting subtask.

@@ -24,8 +24,9 @@ bool Switches(const MetaEnv& env, const float* action) {
 
 }  // namespace
 
-bool LookaheadOutcome::BetterThan(const LookaheadOutcome& o) const {
+bool LookaheadOutcome::BetterThan(const LookaheadOutcome& o, bool nearer) const {
   if (success != o.success) return success;
+  if (success && nearer && min_dist_m != o.min_dist_m) return min_dist_m < o.min_dist_m;
   if (success) return success_step < o.success_step;
   if (fell != o.fell) return !fell;
   return min_dist_m < o.min_dist_m;
@@ -67,10 +68,14 @@ LookaheadPlanner::LookaheadPlanner(std::shared_ptr<const MetaPlan> plan,
 }
 
 LookaheadPlanner::LookaheadPlanner(std::shared_ptr<PolicyRunner> policy,
-                                   const std::vector<double>& delays_s, const TaskEnvConfig& config,
+                                   const PlannerConfig& lookahead, const TaskEnvConfig& config,
                                    const std::vector<FrozenPolicyData>& frozen)
     : base_(std::move(policy)) {
-  config_.lookahead_delays_s = delays_s;
+  config_.lookahead_delays_s = lookahead.lookahead_delays_s;
+  config_.lookahead_sides = lookahead.lookahead_sides;
+  config_.lookahead_straight_s = lookahead.lookahead_straight_s;
+  config_.lookahead_rank = lookahead.lookahead_rank;
+  config_.lookahead_m = lookahead.lookahead_m;
   Init(config, frozen);
 }
 
@@ -100,6 +105,16 @@ void LookaheadPlanner::Reset(uint64_t seed) {
   stats_ = Stats();
 }
 
+void LookaheadPlanner::OtherTurn(const MetaEnv& env, float* action) {
+  const int cls = static_cast<int>(std::lround(action[0]));
+  const std::vector<std::string>& c = env.meta().choices;
+  if (cls < 0 || cls >= static_cast<int>(c.size())) return;
+  const int id = SubtaskIdOf(c[cls]);
+  if (id != kLeftTurn && id != kRightTurn) return;
+  const int other = ClassOf(env, id == kLeftTurn ? kRightTurn : kLeftTurn);
+  if (other >= 0) action[0] = static_cast<float>(other);
+}
+
 void LookaheadPlanner::Straight(const MetaEnv& env, float* action) const {
   if (env.active() != kWalk) return;
   action[1] = 0.0f;  // ahead, as MetaPlanner keeps the target while not walking
@@ -124,9 +139,10 @@ LookaheadOutcome LookaheadPlanner::Rollout(const MetaEnvState& s, const MetaDeci
   ++stats_.rollouts;
   sim_->RestoreState(s);
   MetaDecider p = before;
-  if (side >= 0) p.set_side(side);
+  if (side >= 0 && side != kOtherTurn) p.set_side(side);
   std::vector<float> obs(sim_->spec().obs_dim), a(sim_->spec().act_dim);
   p.Act(*sim_, a.data());
+  if (side == kOtherTurn) OtherTurn(*sim_, a.data());
   if (hold_steps > 0) a[0] = static_cast<float>(ClassOf(*sim_, sim_->active()));
   if (straight_steps > 0) Straight(*sim_, a.data());
   for (int k = 1;; ++k) {
@@ -143,7 +159,9 @@ void LookaheadPlanner::Act(MetaEnv& env, float* action) {
   const bool straight = step < straight_until_;
   const MetaDecider before = base_;
   base_.Act(env, action);
-  const bool first = before.side() < 0;
+  // A policy's first decision is its first step, looked at only for straight-on starts (the
+  // rules' is their choice of side).
+  const bool first = before.is_policy() ? step == 0 && !straights_.empty() : before.side() < 0;
   const bool switches = Switches(env, action);
   if (!first && !switches) {
     if (hold) action[0] = static_cast<float>(ClassOf(env, env.active()));
@@ -161,7 +179,16 @@ void LookaheadPlanner::Act(MetaEnv& env, float* action) {
     return;
   }
   std::vector<int> sides{-1};
-  if (first && config_.lookahead_sides) sides = {base_.side(), 1 - base_.side()};
+  if (config_.lookahead_sides) {
+    if (!base_.is_policy() && first) {
+      sides = {base_.side(), 1 - base_.side()};
+    } else if (base_.is_policy() && Switches(env, action)) {
+      // Into the other turn, when it switches into a turn.
+      std::vector<float> other(action, action + env.spec().act_dim);
+      OtherTurn(env, other.data());
+      if (other[0] != action[0]) sides = {-1, kOtherTurn};
+    }
+  }
   std::vector<int> holds{0};
   if (Switches(env, action)) holds.insert(holds.end(), delays_.begin(), delays_.end());
   std::vector<int> straights{0};
@@ -176,7 +203,7 @@ void LookaheadPlanner::Act(MetaEnv& env, float* action) {
       for (int h : holds) {
         const LookaheadOutcome o = Rollout(s, before, side, h, st);
         if (!stats_.predicted_any && !have) stats_.rules = o;
-        if (!have || o.BetterThan(best)) {
+        if (!have || Better(o, best)) {
           best = o;
           best_side = side;
           best_hold = h;
@@ -189,7 +216,9 @@ void LookaheadPlanner::Act(MetaEnv& env, float* action) {
   stats_.predicted_any = true;
   stats_.predicted = best;
   if (best_side != sides[0] || best_hold != 0 || best_straight != 0) ++stats_.changed;
-  if (best_side >= 0 && best_side != base_.side()) {
+  if (best_side == kOtherTurn) {
+    OtherTurn(env, action);
+  } else if (best_side >= 0 && best_side != base_.side()) {
     base_ = before;
     base_.set_side(best_side);
     base_.Act(env, action);

@@ -27,8 +27,9 @@ struct LookaheadOutcome {
   int success_step = -1;  // control step of the success
   bool fell = false;
   double min_dist_m = 0.0;
-  // Success, sooner; then no fall; then nearer (false when equal).
-  bool BetterThan(const LookaheadOutcome& o) const;
+  // Success, sooner (`nearer`: success, nearer, then sooner); then no fall; then nearer (false
+  // when equal).
+  bool BetterThan(const LookaheadOutcome& o, bool nearer = false) const;
   static LookaheadOutcome Of(const MetaEpisode& e);
 };
 
@@ -44,6 +45,7 @@ class MetaDecider {
   void Act(const MetaEnv& env, float* action);
   // The rules' turn side (-1 before their first decision); a policy has none to choose (0).
   int side() const { return rules_ ? rules_->side() : 0; }
+  bool is_policy() const { return !rules_; }
   void set_side(int side) {
     if (rules_) rules_->set_side(side);
   }
@@ -59,9 +61,11 @@ class LookaheadPlanner {
   // The planner's rules improved as its config's lookahead_* fields say.
   LookaheadPlanner(std::shared_ptr<const MetaPlan> plan, const TaskEnvConfig& config,
                    const std::vector<FrozenPolicyData>& frozen);
-  // A meta policy improved by delaying its switches by each of `delays_s` (no sides: the policy
-  // picks its turn itself).
-  LookaheadPlanner(std::shared_ptr<PolicyRunner> policy, const std::vector<double>& delays_s,
+  // A meta policy improved as `lookahead`'s lookahead_* fields say: its switches delayed by each
+  // of lookahead_delays_s; with lookahead_sides, each switch into a turn also simulated into the
+  // other turn; at its first step, the walker walking straight on for each of
+  // lookahead_straight_s before the policy steers it; outcomes ranked by lookahead_rank.
+  LookaheadPlanner(std::shared_ptr<PolicyRunner> policy, const PlannerConfig& lookahead,
                    const TaskEnvConfig& config, const std::vector<FrozenPolicyData>& frozen);
   ~LookaheadPlanner();
   // After env.Seed(seed) and env.Reset: the simulator is seeded and reset alike (the same spawn
@@ -82,6 +86,10 @@ class LookaheadPlanner {
     LookaheadOutcome rules;
   };
   const Stats& stats() const { return stats_; }
+  // Whether `a` ranks above `b` as this lookahead ranks outcomes.
+  bool Better(const LookaheadOutcome& a, const LookaheadOutcome& b) const {
+    return a.BetterThan(b, config_.lookahead_rank == "nearer");
+  }
 
  private:
   // One decision of the rules on `env` as the acting env and every rollout make it: at a switch
@@ -89,8 +97,13 @@ class LookaheadPlanner {
   // subtask goes on whatever the rules say.
   // `straight`: the walker's target is straight ahead instead (the first decision's alternatives).
   void RuleStep(MetaEnv& env, MetaDecider& planner, bool hold, bool straight, float* action) const;
+  // `side`: the rules' turn (>= 0), kOtherTurn (a policy's switch goes into the other turn
+  // instead) or -1 (as decided).
   LookaheadOutcome Rollout(const MetaEnvState& s, const MetaDecider& before, int side,
                            int hold_steps, int straight_steps);
+  static constexpr int kOtherTurn = 2;
+  // A policy's switch into a turn turned into the other turn.
+  static void OtherTurn(const MetaEnv& env, float* action);
   void Straight(const MetaEnv& env, float* action) const;
   void Init(const TaskEnvConfig& config, const std::vector<FrozenPolicyData>& frozen);
   PlannerConfig config_;  // the lookahead_* fields and lookahead_m

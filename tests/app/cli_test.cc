@@ -235,7 +235,7 @@ TEST_F(CliTest, MetaEvalLooksAheadForAMetaPolicyOnlyWhenAsked) {
   Result r = Perch("eval --task sit_chair --planner --config " + src +
                    "/configs/meta_zone1_plan5_30hz.json --trials 2 --lookahead-delays-s 0.3");
   EXPECT_NE(r.code, 0);
-  EXPECT_TRUE(Has(r.out, "--lookahead-delays-s: for a meta policy")) << r.out;
+  EXPECT_TRUE(Has(r.out, "for a meta policy; the planner's lookahead is its config's")) << r.out;
   r = Perch("eval --task sit_chair --model " + src +
             "/models/sit_chair/policy.bin --trials 2 --lookahead-delays-s -1");
   EXPECT_NE(r.code, 0);
@@ -245,13 +245,27 @@ TEST_F(CliTest, MetaEvalLooksAheadForAMetaPolicyOnlyWhenAsked) {
             "/models/sit_chair/policy.bin --trials 2 --stochastic --lookahead-delays-s 0.5");
   EXPECT_NE(r.code, 0);
   EXPECT_TRUE(Has(r.out, "needs its mean action")) << r.out;
+  // A rank without a lookahead, or a rank that is none of the two, is refused.
+  r = Perch("eval --task sit_chair --model " + src +
+            "/models/sit_chair/policy.bin --trials 2 --lookahead-rank nearer");
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "--lookahead-rank: only with a lookahead")) << r.out;
+  r = Perch(
+      "eval --task sit_chair --model " + src +
+      "/models/sit_chair/policy.bin --trials 2 --lookahead-delays-s 0.5 --lookahead-rank far");
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "--lookahead-rank")) << r.out;
   r = Perch("eval --task sit_chair --model " + src +
                 "/models/sit_chair/policy.bin --zone 1 --trials 2 --seed 7 --threads 2 --json "
-                "--lookahead-delays-s 0.5",
+                "--lookahead-delays-s 0.5 --lookahead-sides --lookahead-straight-s 0.3 "
+                "--lookahead-rank nearer",
             false);
   ASSERT_EQ(r.code, 0) << r.out;
   const Json j = Json::parse(r.out);
   EXPECT_EQ(j["lookahead_delays_s"], Json({0.5}));
+  EXPECT_EQ(j["lookahead_rank"], "nearer");
+  EXPECT_EQ(j["lookahead_sides"], true);
+  EXPECT_EQ(j["lookahead_straight_s"], Json({0.3}));
   EXPECT_EQ(j["lookahead"]["trials_as_predicted"].get<int>(),
             j["lookahead"]["trials_predicted"].get<int>());
   EXPECT_GE(j["lookahead"]["rollouts_per_trial"].get<double>(), 2.0);

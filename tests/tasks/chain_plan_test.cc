@@ -10,6 +10,7 @@
 #include "tasks/meta_env.h"
 #include "tasks/meta_eval.h"
 #include "tasks/meta_expert.h"
+#include "tasks/meta_lookahead.h"
 
 namespace perch {
 namespace {
@@ -160,7 +161,7 @@ TEST(ChainPlan, PlannerConfigIsStrictAndNamesTheField) {
         Json{{"value_wait_s", 5.0}}, Json{{"abort_recover_s", -1.0}},
         Json{{"sit_retry_value", -1.0}}, Json{{"lookahead_delays_s", {0.0}}},
         Json{{"lookahead_delays_s", {4.0}}}, Json{{"lookahead_sides", true}, {"side", "left"}},
-        Json{{"lookahead_straight_s", {0.5, -1.0}}}}) {
+        Json{{"lookahead_straight_s", {0.5, -1.0}}}, Json{{"lookahead_rank", "closer"}}}) {
     try {
       PlannerConfig::FromJson(bad, "sit_chair.meta.planner");
       ADD_FAILURE() << "accepted " << bad.dump();
@@ -171,7 +172,44 @@ TEST(ChainPlan, PlannerConfigIsStrictAndNamesTheField) {
   }
 }
 
+TEST(ChainPlan, TheNearerRankOrdersSuccessesByTheirMinimumDistance) {
+  LookaheadOutcome soon_far, late_near, fell_near, stood_far;
+  soon_far.success = true;
+  soon_far.success_step = 300;
+  soon_far.min_dist_m = 0.2;
+  late_near = soon_far;
+  late_near.success_step = 500;
+  late_near.min_dist_m = 0.1;
+  fell_near.fell = true;
+  fell_near.min_dist_m = 0.05;
+  stood_far.min_dist_m = 0.9;
+  EXPECT_TRUE(soon_far.BetterThan(late_near));
+  EXPECT_TRUE(late_near.BetterThan(soon_far, /*nearer=*/true));
+  EXPECT_FALSE(soon_far.BetterThan(late_near, /*nearer=*/true));
+  // Equally near: the sooner.
+  LookaheadOutcome soon_near = late_near;
+  soon_near.success_step = 200;
+  EXPECT_TRUE(soon_near.BetterThan(late_near, true));
+  EXPECT_FALSE(late_near.BetterThan(late_near, true));
+  // Failures rank alike either way: a success first, then no fall, then nearer.
+  for (bool nearer : {false, true}) {
+    EXPECT_TRUE(soon_far.BetterThan(fell_near, nearer));
+    EXPECT_TRUE(stood_far.BetterThan(fell_near, nearer));
+    EXPECT_FALSE(fell_near.BetterThan(stood_far, nearer));
+  }
+}
+
 // ---- with the delivered subtasks ---------------------------------------------------------------
+
+// min_dist_mean_m is the trial-weighted mean of the successes' and the failures' means.
+void ExpectMinDistSplitBySuccess(const Json& j) {
+  const double n = j["trials"].get<double>(), s = j["success_rate"].get<double>();
+  EXPECT_NEAR(j["min_dist_mean_m"].get<double>(),
+              s * j["min_dist_success_mean_m"].get<double>() +
+                  (1 - s) * j["min_dist_failure_mean_m"].get<double>(),
+              1e-9);
+  EXPECT_GT(n, 0);
+}
 
 TaskEnvConfig PlannedMeta(int runs) {
   Json env{{"task", "sit_chair"},
@@ -283,6 +321,7 @@ TEST(ChainPlan, TheLookaheadIsExactAndDoesAtLeastAsWellAsTheRules) {
   o.planner = std::make_shared<const MetaPlan>(plan);
   const Json rules = EvaluateMeta(c, proto::ModelWeights(), frozen, o);
   EXPECT_FALSE(rules.contains("lookahead"));
+  ExpectMinDistSplitBySuccess(rules);
   MetaPlan ahead = plan;
   ahead.config.lookahead_delays_s = {0.5};
   ahead.config.lookahead_sides = true;
@@ -303,6 +342,16 @@ TEST(ChainPlan, TheLookaheadIsExactAndDoesAtLeastAsWellAsTheRules) {
   const Json one = EvaluateMeta(c, proto::ModelWeights(), frozen, o);
   EXPECT_EQ(one["success_rate"], j["success_rate"]);
   EXPECT_EQ(one["sequences"], j["sequences"]);
+  ExpectMinDistSplitBySuccess(j);
+  // Ranked by the nearer success: exact, and never worse than the rules by that rank.
+  ahead.config.lookahead_rank = "nearer";
+  o.planner = std::make_shared<const MetaPlan>(ahead);
+  const Json near = EvaluateMeta(c, proto::ModelWeights(), frozen, o);
+  EXPECT_EQ(near["lookahead"]["trials_as_predicted"].get<int>(), 6);
+  EXPECT_EQ(near["lookahead"]["trials_not_worse_than_rules"].get<int>(), 6);
+  EXPECT_EQ(near["planner"]["config"]["lookahead_rank"], "nearer");
+  EXPECT_GE(near["success_rate"].get<double>(),
+            near["lookahead"]["rules_success_rate"].get<double>());
 }
 
 TEST(ChainPlan, ThePlannedChainRecordsWhereEachSitBegan) {
