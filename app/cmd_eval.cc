@@ -184,6 +184,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     std::vector<double> lookahead_delays_s;    // sit_chair with a meta policy: its lookahead
     bool lookahead_sides = false;              // ... with the other turn at each turn switch
     std::vector<double> lookahead_straight_s;  // ... with straight-on starts [s]
+    std::vector<double> lookahead_detour_deg;  // ... and detours [deg]
     std::string lookahead_rank = "sooner";     // ... and how it ranks two successes
     std::string start_bank = "data/banks/walk_end_poses_eval.bin";  // sit_chair: walk starts
     int threads = std::max(1u, std::thread::hardware_concurrency());
@@ -289,6 +290,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "sit_chair with a meta policy: at its first step also simulate the walker "
                   "walking straight on for each of these times before the policy steers [s]")
       ->check(CLI::Range(0.001, 3.0));
+  cmd->add_option("--lookahead-detour-deg", o->lookahead_detour_deg,
+                  "sit_chair with a meta policy and --lookahead-straight-s: each start also with "
+                  "the walker heading this far off its facing (+ left), e.g. round the chair [deg]")
+      ->check(CLI::Range(-180.0, 180.0));
   cmd->add_option("--lookahead-rank", o->lookahead_rank,
                   "sit_chair with a meta policy's lookahead: which of two successful "
                   "outcomes is better, the sooner or the nearer (smaller minimum pelvis - seat "
@@ -478,11 +483,12 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         // Refused before any work (the planner's calibration, the trials).
         const bool look = !o->lookahead_delays_s.empty() || o->lookahead_sides ||
                           !o->lookahead_straight_s.empty();
-        if (o->planner && (look || o->lookahead_rank != "sooner")) {
+        if (o->planner &&
+            (look || o->lookahead_rank != "sooner" || !o->lookahead_detour_deg.empty())) {
           throw ConfigError(
               "--lookahead-delays-s / --lookahead-sides / --lookahead-straight-s / "
-              "--lookahead-rank: for a meta policy; the planner's lookahead is its config's "
-              "sit_chair.meta.planner.lookahead_*");
+              "--lookahead-detour-deg / --lookahead-rank: for a meta policy; the planner's "
+              "lookahead is its config's sit_chair.meta.planner.lookahead_*");
         }
         if (o->lookahead_rank != "sooner" && !look) {
           throw ConfigError(
@@ -513,6 +519,9 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         mo.policy_lookahead.lookahead_sides = o->lookahead_sides;
         mo.policy_lookahead.lookahead_straight_s = o->lookahead_straight_s;
         mo.policy_lookahead.lookahead_rank = o->lookahead_rank;
+        mo.policy_lookahead.lookahead_detour_deg = o->lookahead_detour_deg;
+        // The planner config's own checks (ranges, a detour needs its times).
+        PlannerConfig::FromJson(mo.policy_lookahead.ToJson(), "--lookahead-*");
         std::vector<proto::BankState> sit_starts, failed_sit_starts;
         // Refuse before the work, as the bank writer would after it.
         for (const std::string* f : {&o->save_sit_starts, &o->save_failed_sit_starts}) {

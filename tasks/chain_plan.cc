@@ -52,7 +52,8 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
                   "lookahead_delays_s",
                   "lookahead_sides",
                   "lookahead_straight_s",
-                  "lookahead_rank"},
+                  "lookahead_rank",
+                  "lookahead_detour_deg"},
                  ctx);
   PlannerConfig c;
   GetOptional(j, "pass_m", c.pass_m, ctx);
@@ -84,6 +85,18 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "lookahead_sides", c.lookahead_sides, ctx);
   GetOptional(j, "lookahead_straight_s", c.lookahead_straight_s, ctx);
   GetOptional(j, "lookahead_rank", c.lookahead_rank, ctx);
+  GetOptional(j, "lookahead_detour_deg", c.lookahead_detour_deg, ctx);
+  if (c.lookahead_detour_deg.size() > 8) {
+    throw ConfigError(ctx + ".lookahead_detour_deg: at most 8 headings");
+  }
+  for (double h : c.lookahead_detour_deg) {
+    if (!(std::abs(h) > 0 && std::abs(h) <= 180)) {
+      throw ConfigError(ctx + ".lookahead_detour_deg: each must be in [-180, 180] deg and not 0");
+    }
+  }
+  if (!c.lookahead_detour_deg.empty() && c.lookahead_straight_s.empty()) {
+    throw ConfigError(ctx + ".lookahead_detour_deg: needs lookahead_straight_s (how long)");
+  }
   if (c.lookahead_rank != "sooner" && c.lookahead_rank != "nearer") {
     throw ConfigError(ctx + ".lookahead_rank: must be \"sooner\" or \"nearer\", not \"" +
                       c.lookahead_rank + "\"");
@@ -181,7 +194,8 @@ Json PlannerConfig::ToJson() const {
               {"lookahead_delays_s", lookahead_delays_s},
               {"lookahead_sides", lookahead_sides},
               {"lookahead_straight_s", lookahead_straight_s},
-              {"lookahead_rank", lookahead_rank}};
+              {"lookahead_rank", lookahead_rank},
+              {"lookahead_detour_deg", lookahead_detour_deg}};
 }
 
 Eigen::Vector2d TurnCalibration::DisplacementAt(double rotation) const {

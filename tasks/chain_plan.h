@@ -141,6 +141,10 @@ struct PlannerConfig {
   // ... and at the first decision, the walker walking straight on for each of these times before
   // the rules steer it [s]. Empty: only the rules' steering.
   std::vector<double> lookahead_straight_s;
+  // ... each also with the walker heading this far off its facing at that decision (a fixed
+  // direction, + left) instead of straight ahead, e.g. a detour round the chair [deg]. Empty: only
+  // straight ahead.
+  std::vector<double> lookahead_detour_deg;
   // How two successful outcomes are ranked: "sooner" (the earlier success) or "nearer" (the
   // smaller minimum pelvis - seat distance, the paper's second metric; then sooner). Failures
   // rank alike either way: no fall, then nearer.

@@ -351,6 +351,7 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
     j["lookahead_sides"] = la.lookahead_sides;
     j["lookahead_straight_s"] = la.lookahead_straight_s;
     j["lookahead_rank"] = la.lookahead_rank;
+    j["lookahead_detour_deg"] = la.lookahead_detour_deg;
   }
   if (lookahead) {
     // How much looking ahead was done and changed, and whether the simulator was exact (the

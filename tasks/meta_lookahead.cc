@@ -2,8 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <utility>
 
 #include "learner/policy.h"
+#include "tasks/imitation.h"
 
 namespace perch {
 
@@ -75,6 +78,7 @@ LookaheadPlanner::LookaheadPlanner(std::shared_ptr<PolicyRunner> policy,
   config_.lookahead_sides = lookahead.lookahead_sides;
   config_.lookahead_straight_s = lookahead.lookahead_straight_s;
   config_.lookahead_rank = lookahead.lookahead_rank;
+  config_.lookahead_detour_deg = lookahead.lookahead_detour_deg;
   config_.lookahead_m = lookahead.lookahead_m;
   Init(config, frozen);
 }
@@ -90,6 +94,7 @@ void LookaheadPlanner::Init(const TaskEnvConfig& config,
   for (double d : config_.lookahead_straight_s) {
     straights_.push_back(std::max(1, static_cast<int>(std::lround(d / period_s))));
   }
+  for (double h : config_.lookahead_detour_deg) detours_.push_back(h * M_PI / 180.0);
 }
 
 LookaheadPlanner::~LookaheadPlanner() = default;
@@ -115,14 +120,16 @@ void LookaheadPlanner::OtherTurn(const MetaEnv& env, float* action) {
   if (other >= 0) action[0] = static_cast<float>(other);
 }
 
-void LookaheadPlanner::Straight(const MetaEnv& env, float* action) const {
+void LookaheadPlanner::Straight(const MetaEnv& env, double yaw, float* action) const {
   if (env.active() != kWalk) return;
-  action[1] = 0.0f;  // ahead, as MetaPlanner keeps the target while not walking
+  // Ahead (as MetaPlanner keeps the target while not walking), or toward `yaw`.
+  action[1] =
+      std::isnan(yaw) ? 0.0f : static_cast<float>(AngleDiff(yaw, env.humanoid().RootRpy().z()));
   action[2] = static_cast<float>(config_.lookahead_m);
 }
 
 void LookaheadPlanner::RuleStep(MetaEnv& env, MetaDecider& planner, bool hold, bool straight,
-                                float* action) const {
+                                double straight_yaw, float* action) const {
   const MetaDecider before = planner;
   planner.Act(env, action);
   if (before.side() < 0 || Switches(env, action)) {
@@ -131,11 +138,12 @@ void LookaheadPlanner::RuleStep(MetaEnv& env, MetaDecider& planner, bool hold, b
     planner.Act(env, action);
   }
   if (hold) action[0] = static_cast<float>(ClassOf(env, env.active()));
-  if (straight) Straight(env, action);
+  if (straight) Straight(env, straight_yaw, action);
 }
 
 LookaheadOutcome LookaheadPlanner::Rollout(const MetaEnvState& s, const MetaDecider& before,
-                                           int side, int hold_steps, int straight_steps) {
+                                           int side, int hold_steps, int straight_steps,
+                                           double straight_yaw) {
   ++stats_.rollouts;
   sim_->RestoreState(s);
   MetaDecider p = before;
@@ -144,11 +152,11 @@ LookaheadOutcome LookaheadPlanner::Rollout(const MetaEnvState& s, const MetaDeci
   p.Act(*sim_, a.data());
   if (side == kOtherTurn) OtherTurn(*sim_, a.data());
   if (hold_steps > 0) a[0] = static_cast<float>(ClassOf(*sim_, sim_->active()));
-  if (straight_steps > 0) Straight(*sim_, a.data());
+  if (straight_steps > 0) Straight(*sim_, straight_yaw, a.data());
   for (int k = 1;; ++k) {
     const StepResult r = sim_->Step(a.data(), obs.data());
     if (r.terminated || r.truncated || sim_->episode().success_step >= 0) break;
-    RuleStep(*sim_, p, k < hold_steps, k < straight_steps, a.data());
+    RuleStep(*sim_, p, k < hold_steps, k < straight_steps, straight_yaw, a.data());
   }
   return LookaheadOutcome::Of(sim_->episode());
 }
@@ -165,7 +173,7 @@ void LookaheadPlanner::Act(MetaEnv& env, float* action) {
   const bool switches = Switches(env, action);
   if (!first && !switches) {
     if (hold) action[0] = static_cast<float>(ClassOf(env, env.active()));
-    if (straight) Straight(env, action);
+    if (straight) Straight(env, straight_yaw_, action);
     return;
   }
   // As RuleStep: save and restore, so that what follows is what a rollout from here simulates.
@@ -175,7 +183,7 @@ void LookaheadPlanner::Act(MetaEnv& env, float* action) {
   base_.Act(env, action);
   if (hold || straight) {
     if (hold) action[0] = static_cast<float>(ClassOf(env, env.active()));
-    if (straight) Straight(env, action);
+    if (straight) Straight(env, straight_yaw_, action);
     return;
   }
   std::vector<int> sides{-1};
@@ -191,23 +199,33 @@ void LookaheadPlanner::Act(MetaEnv& env, float* action) {
   }
   std::vector<int> holds{0};
   if (Switches(env, action)) holds.insert(holds.end(), delays_.begin(), delays_.end());
-  std::vector<int> straights{0};
-  if (first) straights.insert(straights.end(), straights_.begin(), straights_.end());
+  // Straight-on starts: [meta steps, world direction (NaN: ahead)].
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::vector<std::pair<int, double>> straights{{0, nan}};
+  if (first) {
+    const double facing = env.humanoid().RootRpy().z();
+    for (int st : straights_) {
+      straights.emplace_back(st, nan);
+      for (double d : detours_) straights.emplace_back(st, facing + d);
+    }
+  }
   if (sides.size() * holds.size() * straights.size() < 2) return;
   ++stats_.points;
   int best_side = sides[0], best_hold = 0, best_straight = 0;
+  double best_yaw = nan;
   LookaheadOutcome best;
   bool have = false;
   for (int side : sides) {
-    for (int st : straights) {
+    for (const auto& [st, yaw] : straights) {
       for (int h : holds) {
-        const LookaheadOutcome o = Rollout(s, before, side, h, st);
+        const LookaheadOutcome o = Rollout(s, before, side, h, st, yaw);
         if (!stats_.predicted_any && !have) stats_.rules = o;
         if (!have || Better(o, best)) {
           best = o;
           best_side = side;
           best_hold = h;
           best_straight = st;
+          best_yaw = yaw;
           have = true;
         }
       }
@@ -229,7 +247,8 @@ void LookaheadPlanner::Act(MetaEnv& env, float* action) {
   }
   if (best_straight > 0) {
     straight_until_ = step + best_straight;
-    Straight(env, action);
+    straight_yaw_ = best_yaw;
+    Straight(env, straight_yaw_, action);
   }
 }
 

@@ -96,24 +96,28 @@ class LookaheadPlanner {
   // (or the first decision) the env's state is saved and restored first. `hold`: the running
   // subtask goes on whatever the rules say.
   // `straight`: the walker's target is straight ahead instead (the first decision's alternatives).
-  void RuleStep(MetaEnv& env, MetaDecider& planner, bool hold, bool straight, float* action) const;
+  // `straight_yaw`: the world direction it walks then [rad] (NaN: straight ahead each step).
+  void RuleStep(MetaEnv& env, MetaDecider& planner, bool hold, bool straight, double straight_yaw,
+                float* action) const;
   // `side`: the rules' turn (>= 0), kOtherTurn (a policy's switch goes into the other turn
   // instead) or -1 (as decided).
   LookaheadOutcome Rollout(const MetaEnvState& s, const MetaDecider& before, int side,
-                           int hold_steps, int straight_steps);
+                           int hold_steps, int straight_steps, double straight_yaw);
   static constexpr int kOtherTurn = 2;
   // A policy's switch into a turn turned into the other turn.
   static void OtherTurn(const MetaEnv& env, float* action);
-  void Straight(const MetaEnv& env, float* action) const;
+  void Straight(const MetaEnv& env, double yaw, float* action) const;
   void Init(const TaskEnvConfig& config, const std::vector<FrozenPolicyData>& frozen);
   PlannerConfig config_;  // the lookahead_* fields and lookahead_m
   std::unique_ptr<MetaEnv> sim_;
   MetaDecider base_;
-  std::vector<int> delays_;     // [meta steps], each > 0
-  std::vector<int> straights_;  // [meta steps], each > 0
+  std::vector<int> delays_;      // [meta steps], each > 0
+  std::vector<int> straights_;   // [meta steps], each > 0
+  std::vector<double> detours_;  // [rad], off the facing at the decision
   int meta_step_ = 0;
-  int hold_until_ = 0;      // the running subtask goes on while meta_step_ < hold_until_
-  int straight_until_ = 0;  // the walker walks straight on while meta_step_ < straight_until_
+  int hold_until_ = 0;       // the running subtask goes on while meta_step_ < hold_until_
+  int straight_until_ = 0;   // the walker walks straight on while meta_step_ < straight_until_
+  double straight_yaw_ = 0;  // ... in this world direction [rad] (NaN: ahead)
   Stats stats_;
 };
 

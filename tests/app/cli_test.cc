@@ -255,6 +255,12 @@ TEST_F(CliTest, MetaEvalLooksAheadForAMetaPolicyOnlyWhenAsked) {
       "/models/sit_chair/policy.bin --trials 2 --lookahead-delays-s 0.5 --lookahead-rank far");
   EXPECT_NE(r.code, 0);
   EXPECT_TRUE(Has(r.out, "--lookahead-rank")) << r.out;
+  // A detour needs to know for how long.
+  r = Perch("eval --task sit_chair --model " + src +
+            "/models/sit_chair/policy.bin --trials 2 --lookahead-delays-s 0.5 "
+            "--lookahead-detour-deg 60");
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "lookahead_detour_deg: needs lookahead_straight_s")) << r.out;
   r = Perch("eval --task sit_chair --model " + src +
                 "/models/sit_chair/policy.bin --zone 1 --trials 2 --seed 7 --threads 2 --json "
                 "--lookahead-delays-s 0.5 --lookahead-sides --lookahead-straight-s 0.3 "

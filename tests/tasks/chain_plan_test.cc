@@ -154,14 +154,27 @@ TEST(ChainPlan, PlannerConfigIsStrictAndNamesTheField) {
   const PlannerConfig c = PlannerConfig::FromJson(PlannerConfig().ToJson(), "p");
   EXPECT_EQ(c.ToJson(), PlannerConfig().ToJson());
   for (const Json& bad :
-       {Json{{"pass", 0.3}}, Json{{"side", "up"}}, Json{{"reach_m", 2.0}},
-        Json{{"aim_m", {3.0, 0.0}}}, Json{{"pass_m", "x"}}, Json{{"avoid_front_m", 5.0}},
-        Json{{"turn_value_min", -1.0}}, Json{{"sit_value_early", -0.5}},
-        Json{{"sit_value_yaw_deg", 0.0}}, Json{{"turn_abort_value", -1.0}},
-        Json{{"value_wait_s", 5.0}}, Json{{"abort_recover_s", -1.0}},
-        Json{{"sit_retry_value", -1.0}}, Json{{"lookahead_delays_s", {0.0}}},
-        Json{{"lookahead_delays_s", {4.0}}}, Json{{"lookahead_sides", true}, {"side", "left"}},
-        Json{{"lookahead_straight_s", {0.5, -1.0}}}, Json{{"lookahead_rank", "closer"}}}) {
+       {Json{{"pass", 0.3}},
+        Json{{"side", "up"}},
+        Json{{"reach_m", 2.0}},
+        Json{{"aim_m", {3.0, 0.0}}},
+        Json{{"pass_m", "x"}},
+        Json{{"avoid_front_m", 5.0}},
+        Json{{"turn_value_min", -1.0}},
+        Json{{"sit_value_early", -0.5}},
+        Json{{"sit_value_yaw_deg", 0.0}},
+        Json{{"turn_abort_value", -1.0}},
+        Json{{"value_wait_s", 5.0}},
+        Json{{"abort_recover_s", -1.0}},
+        Json{{"sit_retry_value", -1.0}},
+        Json{{"lookahead_delays_s", {0.0}}},
+        Json{{"lookahead_delays_s", {4.0}}},
+        Json{{"lookahead_sides", true}, {"side", "left"}},
+        Json{{"lookahead_straight_s", {0.5, -1.0}}},
+        Json{{"lookahead_rank", "closer"}},
+        Json{{"lookahead_detour_deg", {60.0}}},  // without lookahead_straight_s
+        Json{{"lookahead_straight_s", {0.5}}, {"lookahead_detour_deg", {0.0}}},
+        Json{{"lookahead_straight_s", {0.5}}, {"lookahead_detour_deg", {200.0}}}}) {
     try {
       PlannerConfig::FromJson(bad, "sit_chair.meta.planner");
       ADD_FAILURE() << "accepted " << bad.dump();

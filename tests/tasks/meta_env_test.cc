@@ -521,13 +521,17 @@ TEST(MetaEval, TheMetaPolicyWithLookaheadIsExactAndNoWorseThanAlone) {
   // success: still exact and no worse than the policy alone by that rank, and no success is lost.
   o.policy_lookahead.lookahead_sides = true;
   o.policy_lookahead.lookahead_straight_s = {0.5};
+  o.policy_lookahead.lookahead_detour_deg = {-60.0, 60.0};
   o.policy_lookahead.lookahead_rank = "nearer";
   const Json near = EvaluateMeta(c, meta, frozen, o);
   EXPECT_EQ(near["lookahead_rank"], "nearer");
   EXPECT_EQ(near["lookahead_sides"], true);
   EXPECT_EQ(near["lookahead_straight_s"], Json({0.5}));
+  EXPECT_EQ(near["lookahead_detour_deg"], Json({-60.0, 60.0}));
   EXPECT_EQ(near["lookahead"]["trials_predicted"].get<int>(), 4);
   EXPECT_GE(near["lookahead"]["points_per_trial"].get<double>(), 1.0);  // the start, at least
+  // At the start: as the policy steers, and straight ahead, 60 deg left or right for 0.5 s.
+  EXPECT_GE(near["lookahead"]["rollouts_per_trial"].get<double>(), 4.0);
   EXPECT_EQ(near["lookahead"]["trials_as_predicted"].get<int>(), 4);
   EXPECT_EQ(near["lookahead"]["trials_not_worse_than_rules"].get<int>(), 4);
   EXPECT_GE(near["success_rate"].get<double>(), alone["success_rate"].get<double>());
