@@ -73,13 +73,7 @@ LookaheadPlanner::LookaheadPlanner(std::shared_ptr<const MetaPlan> plan,
 LookaheadPlanner::LookaheadPlanner(std::shared_ptr<PolicyRunner> policy,
                                    const PlannerConfig& lookahead, const TaskEnvConfig& config,
                                    const std::vector<FrozenPolicyData>& frozen)
-    : base_(std::move(policy)) {
-  config_.lookahead_delays_s = lookahead.lookahead_delays_s;
-  config_.lookahead_sides = lookahead.lookahead_sides;
-  config_.lookahead_straight_s = lookahead.lookahead_straight_s;
-  config_.lookahead_rank = lookahead.lookahead_rank;
-  config_.lookahead_detour_deg = lookahead.lookahead_detour_deg;
-  config_.lookahead_m = lookahead.lookahead_m;
+    : config_(lookahead), base_(std::move(policy)) {
   Init(config, frozen);
 }
 
