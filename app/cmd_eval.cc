@@ -481,8 +481,13 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       // planner is measured on each chair (where the sit's clip starts depends on it).
       auto evaluate_meta = [&](const TaskEnvConfig& on_chair) -> Json {
         // Refused before any work (the planner's calibration, the trials).
-        const bool look = !o->lookahead_delays_s.empty() || o->lookahead_sides ||
-                          !o->lookahead_straight_s.empty();
+        PlannerConfig la;  // a meta policy's lookahead: only its lookahead_* fields count
+        la.lookahead_delays_s = o->lookahead_delays_s;
+        la.lookahead_sides = o->lookahead_sides;
+        la.lookahead_straight_s = o->lookahead_straight_s;
+        la.lookahead_rank = o->lookahead_rank;
+        la.lookahead_detour_deg = o->lookahead_detour_deg;
+        const bool look = la.lookahead();
         if (o->planner &&
             (look || o->lookahead_rank != "sooner" || !o->lookahead_detour_deg.empty())) {
           throw ConfigError(
@@ -495,9 +500,8 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
               "--lookahead-rank: only with a lookahead (--lookahead-delays-s, --lookahead-sides "
               "or --lookahead-straight-s)");
         }
-        if (o->lookahead_delays_s.size() > 8 || o->lookahead_straight_s.size() > 8) {
-          throw ConfigError("--lookahead-delays-s / --lookahead-straight-s: at most 8 times");
-        }
+        // The planner config's own checks (at most 8 times, ranges, a detour needs its times).
+        PlannerConfig::FromJson(la.ToJson(), "--lookahead-*");
         TaskEnvConfig mc = on_chair;
         mc.env.spawn = SpawnConfig();
         mc.env.spawn.zone = chain->zone;
@@ -515,13 +519,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         mo.seed = o->eval.seed;
         mo.stochastic = o->eval.stochastic;
         mo.threads = o->threads;
-        mo.policy_lookahead.lookahead_delays_s = o->lookahead_delays_s;
-        mo.policy_lookahead.lookahead_sides = o->lookahead_sides;
-        mo.policy_lookahead.lookahead_straight_s = o->lookahead_straight_s;
-        mo.policy_lookahead.lookahead_rank = o->lookahead_rank;
-        mo.policy_lookahead.lookahead_detour_deg = o->lookahead_detour_deg;
-        // The planner config's own checks (ranges, a detour needs its times).
-        PlannerConfig::FromJson(mo.policy_lookahead.ToJson(), "--lookahead-*");
+        mo.policy_lookahead = la;
         std::vector<proto::BankState> sit_starts, failed_sit_starts;
         // Refuse before the work, as the bank writer would after it.
         for (const std::string* f : {&o->save_sit_starts, &o->save_failed_sit_starts}) {

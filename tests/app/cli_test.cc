@@ -232,36 +232,27 @@ TEST_F(CliTest, MetaEvalSavesItsHandOversToSitAsABankTheSitStartsFrom) {
 // refused with --planner; a bad delay and a sampling policy are refused by name.
 TEST_F(CliTest, MetaEvalLooksAheadForAMetaPolicyOnlyWhenAsked) {
   const std::string src = PERCH_SOURCE_DIR;
-  Result r = Perch("eval --task sit_chair --planner --config " + src +
-                   "/configs/meta_zone1_plan5_30hz.json --trials 2 --lookahead-delays-s 0.3");
-  EXPECT_NE(r.code, 0);
-  EXPECT_TRUE(Has(r.out, "for a meta policy; the planner's lookahead is its config's")) << r.out;
-  r = Perch("eval --task sit_chair --model " + src +
-            "/models/sit_chair/policy.bin --trials 2 --lookahead-delays-s -1");
-  EXPECT_NE(r.code, 0);
-  EXPECT_TRUE(Has(r.out, "--lookahead-delays-s")) << r.out;
+  const std::string policy =
+      "eval --task sit_chair --model " + src + "/models/sit_chair/policy.bin --trials 2 ";
+  auto expect_refused = [&](const std::string& args, const std::string& why) {
+    const Result r = Perch(args);
+    EXPECT_NE(r.code, 0) << args;
+    EXPECT_TRUE(Has(r.out, why)) << args << "\n" << r.out;
+  };
+  expect_refused("eval --task sit_chair --planner --config " + src +
+                     "/configs/meta_zone1_plan5_30hz.json --trials 2 --lookahead-delays-s 0.3",
+                 "for a meta policy; the planner's lookahead is its config's");
+  expect_refused(policy + "--lookahead-delays-s -1", "--lookahead-delays-s");
   // Its rollouts take the policy's mean action, so a sampling policy is refused.
-  r = Perch("eval --task sit_chair --model " + src +
-            "/models/sit_chair/policy.bin --trials 2 --stochastic --lookahead-delays-s 0.5");
-  EXPECT_NE(r.code, 0);
-  EXPECT_TRUE(Has(r.out, "needs its mean action")) << r.out;
+  expect_refused(policy + "--stochastic --lookahead-delays-s 0.5", "needs its mean action");
   // A rank without a lookahead, or a rank that is none of the two, is refused.
-  r = Perch("eval --task sit_chair --model " + src +
-            "/models/sit_chair/policy.bin --trials 2 --lookahead-rank nearer");
-  EXPECT_NE(r.code, 0);
-  EXPECT_TRUE(Has(r.out, "--lookahead-rank: only with a lookahead")) << r.out;
-  r = Perch(
-      "eval --task sit_chair --model " + src +
-      "/models/sit_chair/policy.bin --trials 2 --lookahead-delays-s 0.5 --lookahead-rank far");
-  EXPECT_NE(r.code, 0);
-  EXPECT_TRUE(Has(r.out, "--lookahead-rank")) << r.out;
+  expect_refused(policy + "--lookahead-rank nearer", "--lookahead-rank: only with a lookahead");
+  expect_refused(policy + "--lookahead-delays-s 0.5 --lookahead-rank far", "--lookahead-rank");
   // A detour needs to know for how long.
-  r = Perch("eval --task sit_chair --model " + src +
-            "/models/sit_chair/policy.bin --trials 2 --lookahead-delays-s 0.5 "
-            "--lookahead-detour-deg 60");
-  EXPECT_NE(r.code, 0);
-  EXPECT_TRUE(Has(r.out, "lookahead_detour_deg: needs lookahead_straight_s")) << r.out;
-  r = Perch("eval --task sit_chair --model " + src +
+  expect_refused(policy + "--lookahead-delays-s 0.5 --lookahead-detour-deg 60",
+                 "lookahead_detour_deg: needs lookahead_straight_s");
+  Result r =
+      Perch("eval --task sit_chair --model " + src +
                 "/models/sit_chair/policy.bin --zone 1 --trials 2 --seed 7 --threads 2 --json "
                 "--lookahead-delays-s 0.5 --lookahead-sides --lookahead-straight-s 0.3 "
                 "--lookahead-rank nearer",
