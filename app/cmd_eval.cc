@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <string>
 #include <thread>
@@ -187,6 +188,8 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     std::vector<double> lookahead_detour_deg;  // ... and detours [deg]
     std::string lookahead_rank = "sooner";     // ... and how it ranks two successes
     std::string start_bank = "data/banks/walk_end_poses_eval.bin";  // sit_chair: walk starts
+    std::string records;  // sit_chair: per-trial records, appended as trials finish (resumes)
+    int first_trial = 0;  // sit_chair: a shard's first trial
     int threads = std::max(1u, std::thread::hardware_concurrency());
   };
   auto o = std::make_shared<EvalOpts>();
@@ -265,6 +268,14 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                 "instead of a meta policy (tasks/meta_expert.h); needs --config, no --model");
   cmd->add_option("--matrix-png", o->matrix_png,
                   "sit_chair: draw the subtask transition matrices (per start side) here");
+  cmd->add_option("--records", o->records,
+                  "sit_chair: append each trial's outcome to this JSON-lines file as it finishes; "
+                  "when it exists (same model, config, seed and flags), its trials are not run "
+                  "again: a long evaluation resumes where it stopped (docs/meta.md)");
+  cmd->add_option("--first-trial", o->first_trial,
+                  "sit_chair: run trials K .. K + --trials - 1 (a shard; trial i is the same "
+                  "trial in every shard; perch eval-merge joins shards' --records)")
+      ->check(CLI::Range(0, 100000000));
   cmd->add_option("--threads", o->threads, "sit_chair: threads (default: all cores)")
       ->check(CLI::Range(1, 1024));
   cmd->add_option("--save-sit-starts", o->save_sit_starts,
@@ -473,8 +484,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                         config.env.task + "\"");
     }
     if (config.env.task == "sit_chair") {
-      if (o->cfg.chair == "all" && (!o->filmstrip.empty() || !o->matrix_png.empty())) {
-        throw ConfigError("--filmstrip / --matrix-png: not with --chair all (name one chair)");
+      if (o->cfg.chair == "all" &&
+          (!o->filmstrip.empty() || !o->matrix_png.empty() || !o->records.empty())) {
+        throw ConfigError(
+            "--filmstrip / --matrix-png / --records: not with --chair all (name one chair)");
       }
       // The meta controller on the main task: the authors' zones as defined (whatever spawn the
       // run trained with), walk start states from the evaluation bank (docs/meta.md). The
@@ -519,7 +532,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         mo.seed = o->eval.seed;
         mo.stochastic = o->eval.stochastic;
         mo.threads = o->threads;
+        mo.first_trial = o->first_trial;
         mo.policy_lookahead = la;
+        const proto::ModelWeights meta_weights =
+            o->planner ? proto::ModelWeights() : LoadModelFile(model_file);
         std::vector<proto::BankState> sit_starts, failed_sit_starts;
         // Refuse before the work, as the bank writer would after it.
         for (const std::string* f : {&o->save_sit_starts, &o->save_failed_sit_starts}) {
@@ -535,6 +551,67 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         }
         if (!o->save_sit_starts.empty()) mo.sit_starts = &sit_starts;
         if (!o->save_failed_sit_starts.empty()) mo.failed_sit_starts = &failed_sit_starts;
+        // The records file: made here with its header, or resumed (same header: the same
+        // trials) with its torn last line, if any, dropped; then appended to as trials finish.
+        std::ofstream records;
+        int resumed = 0;
+        if (!o->records.empty()) {
+          Json header = MetaEvalHeader(mc, meta_weights, frozen, mo);
+          header["about"] = {{"model", o->planner ? Json("planner") : Json(model_file)},
+                             {"start_bank", o->start_bank}};
+          const std::string& path = o->records;
+          if (std::filesystem::exists(path)) {
+            MetaRecordsFile f = ReadMetaRecords(path);
+            const std::string diff = FirstHeaderDifference(f.header, header);
+            if (!diff.empty()) {
+              auto brief = [](const Json& h, const std::string& path) {
+                // The value at a dotted path ("env.spawn.zone").
+                const Json* at = &h;
+                for (size_t b = 0; b <= path.size();) {
+                  const size_t e = std::min(path.find('.', b), path.size());
+                  const std::string k = path.substr(b, e - b);
+                  if (!at->is_object() || !at->contains(k)) return std::string("(none)");
+                  at = &(*at)[k];
+                  b = e + 1;
+                }
+                const std::string v = at->dump();
+                return v.size() > 80 ? v.substr(0, 77) + "..." : v;
+              };
+              throw ConfigError("--records " + path + ": its trials were run with another \"" +
+                                diff + "\" (" + brief(f.header, diff) + ", now " +
+                                brief(header, diff) +
+                                "); name a new file, or the same model, config and flags");
+            }
+            for (const MetaTrialRecord& r : f.records) {
+              if (r.trial < mo.first_trial || r.trial >= mo.first_trial + mo.trials) {
+                throw ConfigError("--records " + path + ": holds trial " + std::to_string(r.trial) +
+                                  ", outside this run's trials " + std::to_string(mo.first_trial) +
+                                  " .. " + std::to_string(mo.first_trial + mo.trials - 1) +
+                                  " (--first-trial / --trials)");
+              }
+            }
+            if (f.torn_tail) {
+              std::cerr << "eval: " << path << ": its last line was cut short (a killed run); "
+                        << "that trial runs again\n";
+              std::string bytes = MetaRecordsHeaderLine(f.header) + "\n";
+              for (const MetaTrialRecord& r : f.records) bytes += r.ToJson().dump() + "\n";
+              WriteFileAtomic(path, bytes);
+            }
+            resumed = static_cast<int>(f.records.size());
+            std::cerr << "eval: " << path << ": " << resumed << " of " << mo.trials
+                      << " trials already run; resuming\n";
+            mo.done = std::move(f.records);
+          } else {
+            WriteFileAtomic(path, MetaRecordsHeaderLine(header) + "\n");
+          }
+          records.open(path, std::ios::app | std::ios::binary);
+          if (!records) throw ConfigError("--records " + path + ": cannot open for appending");
+          mo.on_record = [&records, path](const MetaTrialRecord& r) {
+            records << r.ToJson().dump() << "\n";
+            records.flush();
+            if (!records) throw std::runtime_error("--records " + path + ": write failed");
+          };
+        }
         const auto t0 = std::chrono::steady_clock::now();
         const int every = std::max(1, mo.trials / 20);
         mo.progress = [&](int done, int successes) {
@@ -548,8 +625,11 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         MetaTrialFrames ok, bad;
         const bool film = !o->filmstrip.empty();
         Json result =
-            EvaluateMeta(mc, o->planner ? proto::ModelWeights() : LoadModelFile(model_file), frozen,
-                         mo, film ? &ok : nullptr, film ? &bad : nullptr);
+            EvaluateMeta(mc, meta_weights, frozen, mo, film ? &ok : nullptr, film ? &bad : nullptr);
+        if (!o->records.empty()) {
+          result["records"] = o->records;
+          result["resumed_trials"] = resumed;
+        }
         result["model"] = o->planner ? Json("planner") : Json(model_file);
         result["start_bank"] = o->start_bank;
         auto write_bank = [&](const std::string& file, std::vector<proto::BankState>& states,
@@ -878,6 +958,79 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       std::cout << summary.dump() << "\n";
     } else {
       std::cout << "wrote " << a->out << " (mean of " << ws.size() << " models)\n";
+    }
+  });
+
+  struct MergeOpts {
+    std::vector<std::string> files;
+    std::string matrix_png;
+    bool json = false;
+  };
+  auto mg = std::make_shared<MergeOpts>();
+  CLI::App* me = root.add_subcommand(
+      "eval-merge",
+      "Join the --records of sit_chair evaluation shards (perch eval --first-trial) into the "
+      "result one evaluation of all their trials gives");
+  me->add_option("records", mg->files, "records files (perch eval --records)")
+      ->required()
+      ->expected(1, 1 << 16);
+  me->add_option("--matrix-png", mg->matrix_png,
+                 "draw the subtask transition matrices (per start side) here");
+  me->add_flag("--json", mg->json, "print one JSON object on stdout");
+  me->callback([mg]() {
+    Json header;
+    std::vector<MetaTrialRecord> all;
+    std::map<int, std::string> owner;  // trial -> the file that holds it
+    for (const std::string& file : mg->files) {
+      MetaRecordsFile f = ReadMetaRecords(file);
+      if (f.torn_tail) {
+        std::cerr << "eval-merge: " << file << ": its last line was cut short; left out\n";
+      }
+      if (header.is_null()) {
+        header = f.header;
+      } else if (const std::string d = FirstHeaderDifference(header, f.header); !d.empty()) {
+        throw ConfigError(file + ": its trials were run with another \"" + d + "\" than " +
+                          mg->files.front() +
+                          "'s; shards of one evaluation share model, "
+                          "config, seed and flags");
+      }
+      for (MetaTrialRecord& r : f.records) {
+        auto [it, fresh] = owner.emplace(r.trial, file);
+        if (!fresh) {
+          throw ConfigError(file + ": trial " + std::to_string(r.trial) + " is also in " +
+                            it->second + " (overlapping shards)");
+        }
+        all.push_back(std::move(r));
+      }
+    }
+    if (all.empty()) throw ConfigError("eval-merge: the records hold no trials");
+    // Contiguous trials only: a gap is a shard not run (or not finished).
+    const int lo = owner.begin()->first, hi = owner.rbegin()->first;
+    if (hi - lo + 1 != static_cast<int>(all.size())) {
+      int missing = lo;
+      while (owner.count(missing)) ++missing;
+      throw ConfigError("eval-merge: trials " + std::to_string(lo) + " .. " + std::to_string(hi) +
+                        " lack " + std::to_string(hi - lo + 1 - static_cast<int>(all.size())) +
+                        ", the first " + std::to_string(missing) +
+                        " (resume that shard: perch eval --records its file)");
+    }
+    Json result = AggregateMeta(header, std::move(all));
+    const Json about = header.value("about", Json::object());
+    for (const char* k : {"model", "start_bank"}) {
+      if (about.contains(k)) result[k] = about[k];
+    }
+    result["records"] = mg->files;
+    if (!mg->matrix_png.empty()) {
+      SaveTransitionMatrixPng(result, mg->matrix_png);
+      result["transition_matrix_png"] = mg->matrix_png;
+    }
+    if (mg->json) {
+      std::cout << result.dump() << "\n";
+    } else {
+      std::cout << "sit_chair zone " << result["zone"] << ", trials " << result["first_trial"]
+                << " .. " << hi << ": success_rate " << result["success_rate"] << " "
+                << result["success_ci95"].dump() << ", min_dist " << result["min_dist_mean_m"]
+                << " +- " << result["min_dist_std_m"] << " m\n";
     }
   });
 }

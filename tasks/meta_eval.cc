@@ -4,8 +4,11 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <map>
 #include <mutex>
+#include <set>
 #include <thread>
 
 #include "learner/policy.h"
@@ -23,18 +26,8 @@ static_assert(kSit == 2, "MetaEvalOptions::starts_subtask defaults to the sit");
 namespace {
 
 struct TrialResult {
-  bool success = false;
-  bool fell = false;
-  double min_dist_m = 0.0;
-  double time_to_sit_s = 0.0;
-  double pos_err_m = 0.0, height_m = 0.0, yaw_err_rad = 0.0;
-  double spawn_theta = 0.0;
-  std::vector<int> sequence;
-  std::vector<float> begin_value;            // [run] the subtask's critic when it began
+  MetaTrialRecord rec;
   std::vector<proto::BankState> sit_starts;  // its hand-overs to o.starts_subtask (when asked)
-  LookaheadPlanner::Stats lookahead;         // with the planner's lookahead
-  bool lookahead_agreed = false;             // the outcome is what the last look ahead predicted
-  bool lookahead_not_worse = false;  // ... and not worse than the rules' own from the first one
 };
 
 // Who decides in a trial: a meta policy (runner), the planner, or the planner with lookahead.
@@ -95,24 +88,32 @@ TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int tri
   env.on_subtask_begin = nullptr;
   const MetaEpisode& e = env.episode();
   TrialResult out;
-  out.success = e.success_step >= 0;
-  out.fell = e.fell;
-  out.min_dist_m = e.min_dist_m;
-  out.time_to_sit_s = out.success ? e.success_step * dt : 0.0;
-  out.pos_err_m = e.seated_pos_err_m;
-  out.height_m = e.seated_height_m;
-  out.yaw_err_rad = e.seated_yaw_err_rad;
-  out.spawn_theta = e.spawn_theta;
-  out.sequence = e.sequence;
-  out.begin_value = e.begin_value;
+  MetaTrialRecord& rec = out.rec;
+  rec.trial = trial;
+  rec.success = e.success_step >= 0;
+  rec.fell = e.fell;
+  rec.min_dist_m = e.min_dist_m;
+  rec.time_to_sit_s = rec.success ? e.success_step * dt : 0.0;
+  rec.pos_err_m = e.seated_pos_err_m;
+  rec.height_m = e.seated_height_m;
+  rec.yaw_err_rad = e.seated_yaw_err_rad;
+  rec.spawn_theta = e.spawn_theta;
+  rec.sequence = e.sequence;
+  rec.begin_value = e.begin_value;
   out.sit_starts = std::move(sit_starts);
   if (d.lookahead != nullptr) {
-    out.lookahead = d.lookahead->stats();
-    const LookaheadOutcome& p = out.lookahead.predicted;
-    out.lookahead_agreed = out.lookahead.predicted_any && p.success == out.success &&
-                           (p.success ? p.success_step == e.success_step : p.fell == e.fell);
-    out.lookahead_not_worse = out.lookahead.predicted_any &&
-                              !d.lookahead->Better(out.lookahead.rules, LookaheadOutcome::Of(e));
+    const LookaheadPlanner::Stats& st = d.lookahead->stats();
+    const LookaheadOutcome& p = st.predicted;
+    rec.has_lookahead = true;
+    rec.la_points = st.points;
+    rec.la_rollouts = st.rollouts;
+    rec.la_changed = st.changed;
+    rec.la_predicted_any = st.predicted_any;
+    // Before the first look ahead nothing differed: the decider alone did what the trial did.
+    rec.la_rules_success = st.predicted_any ? st.rules.success : rec.success;
+    rec.la_as_predicted = st.predicted_any && p.success == rec.success &&
+                          (p.success ? p.success_step == e.success_step : p.fell == e.fell);
+    rec.la_not_worse = st.predicted_any && !d.lookahead->Better(st.rules, LookaheadOutcome::Of(e));
   }
   return out;
 }
@@ -122,9 +123,9 @@ TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int tri
 // sit: the trial succeeded with it), the mean value of each group, the AUC (the chance that a run
 // that went on started with a higher value than one that failed; 0.5: no information) and the
 // share that went on per value quartile (cut points in `quartile_cuts`).
-Json HandoverValues(const std::vector<TrialResult>& results) {
+Json HandoverValues(const std::vector<MetaTrialRecord>& results) {
   std::array<std::vector<std::pair<float, bool>>, kNumSubtasks> runs;
-  for (const TrialResult& r : results) {
+  for (const MetaTrialRecord& r : results) {
     for (size_t j = 0; j < r.sequence.size() && j < r.begin_value.size(); ++j) {
       const bool last = j + 1 == r.sequence.size();
       const int id = r.sequence[j];
@@ -188,10 +189,322 @@ double RankAuc(std::vector<std::pair<float, bool>> v) {
   return (rank_sum - 0.5 * n_pos * (n_pos + 1.0)) / (static_cast<double>(n_pos) * n_neg);
 }
 
+Json MetaTrialRecord::ToJson() const {
+  Json j{{"trial", trial},
+         {"success", success},
+         {"fell", fell},
+         {"min_dist_m", min_dist_m},
+         {"time_to_sit_s", time_to_sit_s},
+         {"pos_err_m", pos_err_m},
+         {"height_m", height_m},
+         {"yaw_err_rad", yaw_err_rad},
+         {"spawn_theta", spawn_theta},
+         {"sequence", sequence},
+         {"begin_value", begin_value}};
+  if (has_lookahead) {
+    j["lookahead"] = {{"points", la_points},
+                      {"rollouts", la_rollouts},
+                      {"changed", la_changed},
+                      {"predicted_any", la_predicted_any},
+                      {"rules_success", la_rules_success},
+                      {"as_predicted", la_as_predicted},
+                      {"not_worse", la_not_worse}};
+  }
+  return j;
+}
+
+namespace {
+
+template <typename T>
+void Field(const Json& j, const char* key, T* out, const std::string& where) {
+  if (!j.contains(key)) throw ConfigError(where + ": no \"" + key + "\"");
+  try {
+    *out = j.at(key).get<T>();
+  } catch (const Json::exception&) {
+    throw ConfigError(where + ": \"" + key + "\" has the wrong type: " + j.at(key).dump());
+  }
+}
+
+}  // namespace
+
+MetaTrialRecord MetaTrialRecord::FromJson(const Json& j, const std::string& where) {
+  if (!j.is_object()) throw ConfigError(where + ": not a JSON object");
+  MetaTrialRecord r;
+  Field(j, "trial", &r.trial, where);
+  if (r.trial < 0) throw ConfigError(where + ": \"trial\" " + std::to_string(r.trial) + " < 0");
+  Field(j, "success", &r.success, where);
+  Field(j, "fell", &r.fell, where);
+  Field(j, "min_dist_m", &r.min_dist_m, where);
+  Field(j, "time_to_sit_s", &r.time_to_sit_s, where);
+  Field(j, "pos_err_m", &r.pos_err_m, where);
+  Field(j, "height_m", &r.height_m, where);
+  Field(j, "yaw_err_rad", &r.yaw_err_rad, where);
+  Field(j, "spawn_theta", &r.spawn_theta, where);
+  Field(j, "sequence", &r.sequence, where);
+  Field(j, "begin_value", &r.begin_value, where);
+  for (int id : r.sequence) {
+    if (id < 0 || id >= kNumSubtasks) {
+      throw ConfigError(where + ": \"sequence\" holds " + std::to_string(id) + ", not a subtask");
+    }
+  }
+  if (j.contains("lookahead")) {
+    const Json& l = j.at("lookahead");
+    const std::string w = where + ".lookahead";
+    if (!l.is_object()) throw ConfigError(w + ": not a JSON object");
+    r.has_lookahead = true;
+    Field(l, "points", &r.la_points, w);
+    Field(l, "rollouts", &r.la_rollouts, w);
+    Field(l, "changed", &r.la_changed, w);
+    Field(l, "predicted_any", &r.la_predicted_any, w);
+    Field(l, "rules_success", &r.la_rules_success, w);
+    Field(l, "as_predicted", &r.la_as_predicted, w);
+    Field(l, "not_worse", &r.la_not_worse, w);
+  }
+  return r;
+}
+
+Json MetaEvalHeader(const TaskEnvConfig& config, const proto::ModelWeights& meta,
+                    const std::vector<FrozenPolicyData>& frozen, const MetaEvalOptions& o) {
+  const bool planned = o.planner != nullptr;
+  const bool lookahead = planned ? o.planner->config.lookahead() : o.policy_lookahead.lookahead();
+  Json h{{"task", "sit_chair"},
+         {"zone", config.env.spawn.zone},
+         {"chair", config.env.chair},
+         {"seed", o.seed},
+         {"stochastic", o.stochastic},
+         {"choices", config.Section<SitChairTaskConfig>().meta.choices},
+         {"decider", planned ? "planner" : "meta policy"},
+         {"looks_ahead", lookahead},
+         {"env", config.ToJson()}};
+  if (planned) {
+    h["planner"] = o.planner->ToJson();
+  } else {
+    h["meta_sha256"] = Sha256Hex(meta.SerializeAsString());
+  }
+  if (!planned && lookahead) {
+    const PlannerConfig& la = o.policy_lookahead;
+    h["lookahead_delays_s"] = la.lookahead_delays_s;
+    h["lookahead_sides"] = la.lookahead_sides;
+    h["lookahead_straight_s"] = la.lookahead_straight_s;
+    h["lookahead_rank"] = la.lookahead_rank;
+    h["lookahead_detour_deg"] = la.lookahead_detour_deg;
+  }
+  Json subs = Json::object();
+  for (const FrozenPolicyData& f : frozen) subs[f.name] = Sha256Hex(f.model);
+  h["frozen_sha256"] = subs;
+  Json banks = Json::array();
+  for (const std::string& b : config.Section<SitChairTaskConfig>().start.banks) {
+    banks.push_back(std::filesystem::exists(b) ? FileSha256(b) : std::string("missing"));
+  }
+  h["start_banks_sha256"] = banks;
+  return h;
+}
+
+Json AggregateMeta(const Json& header, std::vector<MetaTrialRecord> results) {
+  if (results.empty()) throw ConfigError("eval: no trials to aggregate");
+  std::sort(results.begin(), results.end(),
+            [](const MetaTrialRecord& a, const MetaTrialRecord& b) { return a.trial < b.trial; });
+  for (size_t i = 1; i < results.size(); ++i) {
+    if (results[i].trial == results[i - 1].trial) {
+      throw ConfigError("eval: trial " + std::to_string(results[i].trial) + " twice");
+    }
+  }
+  // Aggregates, in trial order (independent of the threads and the shards).
+  int n_success = 0, n_fell = 0;
+  std::vector<double> min_d, t_sit, pos_cm, yaw_deg, height_cm, min_d_success, min_d_failure;
+  // Transition counts per start side (the chair faces +x: theta > 0 is its left, +y).
+  std::map<std::string, std::map<std::string, std::map<std::string, int>>> trans;
+  std::map<std::string, int> seq_count;
+  std::map<std::string, std::array<int, 2>> seq_ends;      // sequence -> {successes, falls}
+  std::map<std::string, std::array<int, 2>> side_success;  // side -> {successes, trials}
+  for (const MetaTrialRecord& r : results) {
+    n_success += r.success;
+    n_fell += r.fell;
+    min_d.push_back(r.min_dist_m);
+    (r.success ? min_d_success : min_d_failure).push_back(r.min_dist_m);
+    if (r.success) {
+      t_sit.push_back(r.time_to_sit_s);
+      pos_cm.push_back(100.0 * r.pos_err_m);
+      height_cm.push_back(100.0 * r.height_m);
+      yaw_deg.push_back(r.yaw_err_rad * 180.0 / M_PI);
+    }
+    const std::string side = r.spawn_theta >= 0 ? "left" : "right";
+    side_success[side][0] += r.success;
+    side_success[side][1] += 1;
+    std::string prev = "start", seq;
+    for (int id : r.sequence) {
+      trans[side][prev][SubtaskName(id)] += 1;
+      prev = SubtaskName(id);
+      seq += (seq.empty() ? "" : ">") + prev;
+    }
+    trans[side][prev]["end"] += 1;
+    seq_count[seq] += 1;
+    seq_ends[seq][0] += r.success;
+    seq_ends[seq][1] += r.fell;
+  }
+  const int trials = static_cast<int>(results.size());
+  const double n = trials;
+  const auto ci = WilsonInterval95(n_success, trials);
+  std::vector<std::pair<int, std::string>> seqs;
+  for (const auto& [s, c] : seq_count) seqs.push_back({c, s});
+  std::sort(seqs.begin(), seqs.end(), [](const auto& a, const auto& b) {
+    return a.first != b.first ? a.first > b.first : a.second < b.second;
+  });
+  Json top = Json::array();
+  for (size_t i = 0; i < seqs.size() && i < 10; ++i) {
+    const std::array<int, 2>& ends = seq_ends[seqs[i].second];
+    top.push_back({{"sequence", seqs[i].second},
+                   {"trials", seqs[i].first},
+                   {"successes", ends[0]},
+                   {"falls", ends[1]}});
+  }
+  Json sides = Json::object();
+  for (const auto& [side, c] : side_success) {
+    sides[side] = {{"trials", c[1]}, {"success_rate", c[1] ? double(c[0]) / c[1] : 0.0}};
+  }
+  Json j = Json::object();
+  for (const char* k : {"task", "zone", "chair", "seed", "stochastic", "choices", "decider",
+                        "planner", "lookahead_delays_s", "lookahead_sides", "lookahead_straight_s",
+                        "lookahead_rank", "lookahead_detour_deg"}) {
+    if (header.contains(k)) j[k] = header[k];
+  }
+  j.update(Json{{"trials", trials},
+                {"first_trial", results.front().trial},
+                {"success_rate", n_success / n},
+                {"success_ci95", {ci[0], ci[1]}},
+                {"min_dist_mean_m", MeanOf(min_d)},
+                {"min_dist_std_m", StdOf(min_d)},
+                {"fall_rate", n_fell / n},
+                {"seated_position_error_cm_mean", MeanOf(pos_cm)},
+                {"seated_height_cm_mean", MeanOf(height_cm)},
+                {"min_dist_success_mean_m", MeanOf(min_d_success)},
+                {"min_dist_failure_mean_m", MeanOf(min_d_failure)},
+                {"seated_orientation_error_deg_mean", MeanOf(yaw_deg)},
+                {"time_to_sit_s_mean", MeanOf(t_sit)},
+                {"by_side", sides},
+                {"transitions", trans},
+                {"sequences", top}});
+  j["handover_values"] = HandoverValues(results);
+  if (header.value("looks_ahead", false)) {
+    // How much looking ahead was done and changed, and whether the simulator was exact (the
+    // outcome is the one the last look ahead predicted).
+    int points = 0, rollouts = 0, changed = 0, predicted = 0, agreed = 0, not_worse = 0;
+    int rules_success = 0;
+    for (const MetaTrialRecord& r : results) {
+      points += r.la_points;
+      rollouts += r.la_rollouts;
+      changed += r.la_changed;
+      predicted += r.la_predicted_any;
+      agreed += r.la_as_predicted;
+      not_worse += r.la_not_worse;
+      rules_success += r.la_rules_success;
+    }
+    j["lookahead"] = {{"points_per_trial", points / n},
+                      {"rollouts_per_trial", rollouts / n},
+                      {"changed_per_trial", changed / n},
+                      {"trials_predicted", predicted},
+                      {"trials_as_predicted", agreed},
+                      {"trials_not_worse_than_rules", not_worse},
+                      // The rules alone on the same trials (from the first look ahead on, with
+                      // the same restores): what looking ahead bought.
+                      {"rules_success_rate", rules_success / n}};
+  }
+  return j;
+}
+
+std::string MetaRecordsHeaderLine(const Json& header) {
+  return Json{{"perch_meta_eval_records", 1}, {"header", header}}.dump();
+}
+
+MetaRecordsFile ReadMetaRecords(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw ConfigError(path + ": cannot open the records file");
+  std::vector<std::string> lines;
+  std::string line;
+  bool ends_with_newline = true;
+  while (std::getline(f, line)) {
+    ends_with_newline = !f.eof();
+    lines.push_back(line);
+  }
+  MetaRecordsFile out;
+  if (lines.empty()) throw ConfigError(path + ": empty, not a records file (perch eval --records)");
+  Json head;
+  try {
+    head = Json::parse(lines[0]);
+  } catch (const Json::exception&) {
+    throw ConfigError(path + ":1: not a records file (perch eval --records): no JSON header");
+  }
+  if (!head.is_object() || head.value("perch_meta_eval_records", 0) != 1 ||
+      !head.contains("header") || !head["header"].is_object()) {
+    throw ConfigError(path +
+                      ":1: not a records file (perch eval --records): the header lacks "
+                      "\"perch_meta_eval_records\": 1 and its \"header\"");
+  }
+  out.header = head["header"];
+  std::set<int> seen;
+  for (size_t i = 1; i < lines.size(); ++i) {
+    const std::string where = path + ":" + std::to_string(i + 1);
+    const bool last = i + 1 == lines.size();
+    Json j;
+    try {
+      j = Json::parse(lines[i]);
+    } catch (const Json::exception&) {
+      // A run killed mid-write leaves its last line short: that trial runs again.
+      if (last && !ends_with_newline) {
+        out.torn_tail = true;
+        break;
+      }
+      throw ConfigError(where + ": not JSON (a records file is corrupt; nothing was changed)");
+    }
+    MetaTrialRecord r = MetaTrialRecord::FromJson(j, where);
+    if (!seen.insert(r.trial).second) {
+      throw ConfigError(where + ": trial " + std::to_string(r.trial) + " twice");
+    }
+    out.records.push_back(std::move(r));
+  }
+  return out;
+}
+
+std::string FirstHeaderDifference(const Json& a, const Json& b) {
+  std::set<std::string> keys;
+  for (const auto& [k, v] : a.items()) keys.insert(k);
+  for (const auto& [k, v] : b.items()) keys.insert(k);
+  for (const std::string& k : keys) {
+    if (k == "about") continue;  // where the files were, not what ran
+    if (!a.contains(k) || !b.contains(k)) return k;
+    if (a[k].is_object() && b[k].is_object()) {
+      const std::string sub = FirstHeaderDifference(a[k], b[k]);
+      if (!sub.empty()) return k + "." + sub;
+    } else if (a[k] != b[k]) {
+      return k;
+    }
+  }
+  return "";
+}
+
 Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& meta,
                   const std::vector<FrozenPolicyData>& frozen, const MetaEvalOptions& o,
                   MetaTrialFrames* first_success, MetaTrialFrames* first_failure) {
   if (o.trials < 1) throw ConfigError("eval: --trials must be >= 1");
+  if (o.first_trial < 0) throw ConfigError("eval: --first-trial must be >= 0");
+  const int end_trial = o.first_trial + o.trials;
+  {
+    std::set<int> seen;
+    for (const MetaTrialRecord& r : o.done) {
+      if (r.trial < o.first_trial || r.trial >= end_trial) {
+        throw ConfigError("eval: a record of trial " + std::to_string(r.trial) +
+                          " lies outside this evaluation's trials " +
+                          std::to_string(o.first_trial) + " .. " + std::to_string(end_trial - 1));
+      }
+      if (!seen.insert(r.trial).second) {
+        throw ConfigError("eval: trial " + std::to_string(r.trial) + " recorded twice");
+      }
+    }
+  }
+  if (!o.done.empty() && (o.sit_starts != nullptr || o.failed_sit_starts != nullptr)) {
+    throw ConfigError(
+        "eval: hand-over banks need every trial run in this call (not resumed from records)");
+  }
   TaskEnvConfig config = config_in;
   config.MutableSection<SitChairTaskConfig>().meta.subtask_stochastic = o.stochastic;
   const bool planned = o.planner != nullptr;
@@ -228,9 +541,21 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
       d->runner->set_update_obs_stats(false);
     }
   };
-  const int threads = std::clamp(o.threads, 1, o.trials);
-  std::vector<TrialResult> results(o.trials);
-  std::atomic<int> next{0}, done{0}, successes{0};
+  // The trials still to run, in order.
+  std::vector<int> todo;
+  {
+    std::vector<bool> have(o.trials, false);
+    for (const MetaTrialRecord& r : o.done) have[r.trial - o.first_trial] = true;
+    for (int i = 0; i < o.trials; ++i) {
+      if (!have[i]) todo.push_back(o.first_trial + i);
+    }
+  }
+  const int n_todo = static_cast<int>(todo.size());
+  const int threads = std::clamp(o.threads, 1, std::max(1, n_todo));
+  std::vector<TrialResult> results(n_todo);
+  int prior_successes = 0;
+  for (const MetaTrialRecord& r : o.done) prior_successes += r.success;
+  std::atomic<int> next{0}, done{static_cast<int>(o.done.size())}, successes{prior_successes};
   std::mutex progress_mu;
   std::exception_ptr error;
   auto worker = [&]() {
@@ -239,158 +564,59 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
       env.SetFrozenPolicies(frozen);
       Decider decider;
       MakeDecider(&decider);
-      for (int i = next++; i < o.trials; i = next++) {
-        results[i] = RunTrial(env, decider, o, i, nullptr);
-        successes += results[i].success;
+      for (int i = next++; i < n_todo; i = next++) {
+        results[i] = RunTrial(env, decider, o, todo[i], nullptr);
+        successes += results[i].rec.success;
         const int d = ++done;
-        if (o.progress) {
+        if (o.progress || o.on_record) {
           std::lock_guard<std::mutex> lock(progress_mu);
-          o.progress(d, successes.load());
+          if (o.on_record) o.on_record(results[i].rec);
+          if (o.progress) o.progress(d, successes.load());
         }
       }
     } catch (...) {
       std::lock_guard<std::mutex> lock(progress_mu);
       if (!error) error = std::current_exception();
-      next = o.trials;  // the others stop too
+      next = n_todo;  // the others stop too
     }
   };
   std::vector<std::thread> pool;
-  for (int t = 0; t < threads; ++t) pool.emplace_back(worker);
+  if (n_todo > 0) {
+    for (int t = 0; t < threads; ++t) pool.emplace_back(worker);
+  }
   for (std::thread& t : pool) t.join();
   if (error) std::rethrow_exception(error);
 
-  // Aggregates, in trial order (independent of the threads).
-  int n_success = 0, n_fell = 0;
-  std::vector<double> min_d, t_sit, pos_cm, yaw_deg, height_cm, min_d_success, min_d_failure;
-  // Transition counts per start side (the chair faces +x: theta > 0 is its left, +y).
-  std::map<std::string, std::map<std::string, std::map<std::string, int>>> trans;
-  std::map<std::string, int> seq_count;
-  std::map<std::string, std::array<int, 2>> seq_ends;      // sequence -> {successes, falls}
-  std::map<std::string, std::array<int, 2>> side_success;  // side -> {successes, trials}
+  std::vector<MetaTrialRecord> records = o.done;
+  for (const TrialResult& r : results) records.push_back(r.rec);
+  // Hand-over banks in trial order (every trial ran here; checked above).
   for (const TrialResult& r : results) {
     if (o.sit_starts != nullptr) {
       o.sit_starts->insert(o.sit_starts->end(), r.sit_starts.begin(), r.sit_starts.end());
     }
-    if (o.failed_sit_starts != nullptr && !r.success) {
+    if (o.failed_sit_starts != nullptr && !r.rec.success) {
       o.failed_sit_starts->insert(o.failed_sit_starts->end(), r.sit_starts.begin(),
                                   r.sit_starts.end());
     }
   }
-  for (const TrialResult& r : results) {
-    n_success += r.success;
-    n_fell += r.fell;
-    min_d.push_back(r.min_dist_m);
-    (r.success ? min_d_success : min_d_failure).push_back(r.min_dist_m);
-    if (r.success) {
-      t_sit.push_back(r.time_to_sit_s);
-      pos_cm.push_back(100.0 * r.pos_err_m);
-      height_cm.push_back(100.0 * r.height_m);
-      yaw_deg.push_back(r.yaw_err_rad * 180.0 / M_PI);
-    }
-    const std::string side = r.spawn_theta >= 0 ? "left" : "right";
-    side_success[side][0] += r.success;
-    side_success[side][1] += 1;
-    std::string prev = "start", seq;
-    for (int id : r.sequence) {
-      trans[side][prev][SubtaskName(id)] += 1;
-      prev = SubtaskName(id);
-      seq += (seq.empty() ? "" : ">") + prev;
-    }
-    trans[side][prev]["end"] += 1;
-    seq_count[seq] += 1;
-    seq_ends[seq][0] += r.success;
-    seq_ends[seq][1] += r.fell;
-  }
-  const double n = o.trials;
-  const auto ci = WilsonInterval95(n_success, o.trials);
-  std::vector<std::pair<int, std::string>> seqs;
-  for (const auto& [s, c] : seq_count) seqs.push_back({c, s});
-  std::sort(seqs.begin(), seqs.end(), [](const auto& a, const auto& b) {
-    return a.first != b.first ? a.first > b.first : a.second < b.second;
-  });
-  Json top = Json::array();
-  for (size_t i = 0; i < seqs.size() && i < 10; ++i) {
-    const std::array<int, 2>& ends = seq_ends[seqs[i].second];
-    top.push_back({{"sequence", seqs[i].second},
-                   {"trials", seqs[i].first},
-                   {"successes", ends[0]},
-                   {"falls", ends[1]}});
-  }
-  Json sides = Json::object();
-  for (const auto& [side, c] : side_success) {
-    sides[side] = {{"trials", c[1]}, {"success_rate", c[1] ? double(c[0]) / c[1] : 0.0}};
-  }
-  Json j{{"task", "sit_chair"},
-         {"zone", config.env.spawn.zone},
-         {"chair", config.env.chair},
-         {"trials", o.trials},
-         {"seed", o.seed},
-         {"stochastic", o.stochastic},
-         {"threads", threads},
-         {"success_rate", n_success / n},
-         {"success_ci95", {ci[0], ci[1]}},
-         {"min_dist_mean_m", MeanOf(min_d)},
-         {"min_dist_std_m", StdOf(min_d)},
-         {"fall_rate", n_fell / n},
-         {"seated_position_error_cm_mean", MeanOf(pos_cm)},
-         {"seated_height_cm_mean", MeanOf(height_cm)},
-         {"min_dist_success_mean_m", MeanOf(min_d_success)},
-         {"min_dist_failure_mean_m", MeanOf(min_d_failure)},
-         {"seated_orientation_error_deg_mean", MeanOf(yaw_deg)},
-         {"time_to_sit_s_mean", MeanOf(t_sit)},
-         {"by_side", sides},
-         {"transitions", trans},
-         {"sequences", top},
-         {"choices", config.Section<SitChairTaskConfig>().meta.choices},
-         {"decider", planned ? "planner" : "meta policy"}};
-  j["handover_values"] = HandoverValues(results);
-  if (planned) j["planner"] = o.planner->ToJson();
-  if (!planned && lookahead) {
-    const PlannerConfig& la = o.policy_lookahead;
-    j["lookahead_delays_s"] = la.lookahead_delays_s;
-    j["lookahead_sides"] = la.lookahead_sides;
-    j["lookahead_straight_s"] = la.lookahead_straight_s;
-    j["lookahead_rank"] = la.lookahead_rank;
-    j["lookahead_detour_deg"] = la.lookahead_detour_deg;
-  }
-  if (lookahead) {
-    // How much looking ahead was done and changed, and whether the simulator was exact (the
-    // outcome is the one the last look ahead predicted).
-    int points = 0, rollouts = 0, changed = 0, predicted = 0, agreed = 0, not_worse = 0;
-    int rules_success = 0;
-    for (const TrialResult& r : results) {
-      points += r.lookahead.points;
-      rollouts += r.lookahead.rollouts;
-      changed += r.lookahead.changed;
-      predicted += r.lookahead.predicted_any;
-      agreed += r.lookahead_agreed;
-      not_worse += r.lookahead_not_worse;
-      rules_success += r.lookahead.predicted_any ? r.lookahead.rules.success : r.success;
-    }
-    j["lookahead"] = {{"points_per_trial", points / n},
-                      {"rollouts_per_trial", rollouts / n},
-                      {"changed_per_trial", changed / n},
-                      {"trials_predicted", predicted},
-                      {"trials_as_predicted", agreed},
-                      {"trials_not_worse_than_rules", not_worse},
-                      // The rules alone on the same trials (from the first look ahead on, with
-                      // the same restores): what looking ahead bought.
-                      {"rules_success_rate", rules_success / n}};
-  }
+  Json j = AggregateMeta(MetaEvalHeader(config_in, meta, frozen, o), records);
+  j["threads"] = threads;
 
   // Filmstrip material: the first success and the first failure, replayed (trials are
   // deterministic for their seed).
+  std::sort(records.begin(), records.end(),
+            [](const MetaTrialRecord& a, const MetaTrialRecord& b) { return a.trial < b.trial; });
   auto replay = [&](bool want_success, MetaTrialFrames* out) {
     if (out == nullptr) return;
-    for (int i = 0; i < o.trials; ++i) {
-      if (results[i].success != want_success) continue;
+    for (const MetaTrialRecord& r : records) {
+      if (r.success != want_success) continue;
       MetaEnv env(config);
       env.SetFrozenPolicies(frozen);
       Decider d;
       MakeDecider(&d);
-      out->trial = i;
+      out->trial = r.trial;
       out->success = want_success;
-      RunTrial(env, d, o, i, &out->frames);
+      RunTrial(env, d, o, r.trial, &out->frames);
       return;
     }
   };

@@ -23,8 +23,39 @@ namespace perch {
 
 struct MetaPlan;
 
+// One trial's outcome, all the aggregates need: `perch eval --records` saves one per line, so a
+// long evaluation resumes where it stopped and shards run apart merge into the result one run
+// would give (AggregateMeta).
+struct MetaTrialRecord {
+  int trial = -1;
+  bool success = false;
+  bool fell = false;
+  double min_dist_m = 0.0;     // minimum pelvis - seat target distance [m]
+  double time_to_sit_s = 0.0;  // 0 when it failed [s]
+  // At success (MetaEpisode): horizontal distance [m], height above the seat target [m], yaw
+  // error [rad].
+  double pos_err_m = 0.0, height_m = 0.0, yaw_err_rad = 0.0;
+  double spawn_theta = 0.0;        // [rad]
+  std::vector<int> sequence;       // SubtaskId of each run
+  std::vector<float> begin_value;  // [run] the subtask's critic when it began
+  // With a lookahead (tasks/meta_lookahead.h): its work and what it predicted.
+  bool has_lookahead = false;
+  int la_points = 0, la_rollouts = 0, la_changed = 0;
+  bool la_predicted_any = false;
+  bool la_rules_success = false;  // the decider alone (from the first look ahead on) succeeded
+  bool la_as_predicted = false;   // the outcome is the one the last look ahead predicted
+  bool la_not_worse = false;      // ... and not worse than the decider alone
+
+  Json ToJson() const;
+  // ConfigError naming `where` and the field when a field is missing or of the wrong type.
+  static MetaTrialRecord FromJson(const Json& j, const std::string& where);
+};
+
 struct MetaEvalOptions {
   int trials = 100;
+  // Trials first_trial .. first_trial + trials - 1 (trial i always uses seed (seed, i)): shards
+  // of one evaluation on several machines (`perch eval --first-trial`, `perch eval-merge`).
+  int first_trial = 0;
   uint64_t seed = 0;
   // false: the meta's most likely class and mean target, the subtasks' mean actions; true: all
   // sampled (the authors' released visualisation).
@@ -47,6 +78,11 @@ struct MetaEvalOptions {
   // a turn, straight-on walking at the start, the rank). None set: the policy alone. (The
   // planner's lookahead is its config's.)
   PlannerConfig policy_lookahead;
+  // Trials already run (from a records file): not run again, but in the result. Each must lie in
+  // this evaluation's trials, once.
+  std::vector<MetaTrialRecord> done;
+  // Called with each trial's record as it finishes (from the threads, serialised).
+  std::function<void(const MetaTrialRecord&)> on_record;
 };
 
 // The control-step frames of one trial, labelled with the acting subtask.
@@ -55,6 +91,32 @@ struct MetaTrialFrames {
   bool success = false;
   std::vector<PoseFrame> frames;
 };
+
+// What makes two evaluations' trials the same trials: task, zone, chair, seed, stochastic, the
+// decider (the meta model's and every frozen subtask's SHA-256, or the planner's config), the
+// lookahead, the env config and the start banks' SHA-256. Saved as a records file's header; a
+// resume or merge refuses records made under another.
+Json MetaEvalHeader(const TaskEnvConfig& config, const proto::ModelWeights& meta,
+                    const std::vector<FrozenPolicyData>& frozen, const MetaEvalOptions& options);
+
+// The result of the trials `records` (any order; each trial once) run under `header`: the JSON
+// EvaluateMeta returns, but for `threads` (and what the caller adds).
+Json AggregateMeta(const Json& header, std::vector<MetaTrialRecord> records);
+
+// `perch eval --records`: JSON lines, a header ({"perch_meta_eval_records": 1, "header": H}) then
+// one MetaTrialRecord per line in the order the trials finished.
+struct MetaRecordsFile {
+  Json header;
+  std::vector<MetaTrialRecord> records;
+  bool torn_tail = false;  // the last line was cut short (a killed run) and is left out
+};
+// ConfigError naming the file and line: no header, a malformed line other than the last, a trial
+// twice.
+MetaRecordsFile ReadMetaRecords(const std::string& path);
+std::string MetaRecordsHeaderLine(const Json& header);
+// The first key whose value differs between two headers ("" when equal), for the refusal; "about"
+// (the model's and bank's paths, which differ between machines) is not compared.
+std::string FirstHeaderDifference(const Json& a, const Json& b);
 
 // JSON: trials, seed, zone, success_rate, success_ci95, min_dist_mean_m, min_dist_std_m,
 // fall_rate, seated_position_error_cm_mean, seated_orientation_error_deg_mean, time_to_sit_s_mean,

@@ -51,12 +51,13 @@ std::string ReadAll(const std::string& path) {
 
 }  // namespace
 
-std::string FileSha256(const std::string& path) {
-  const std::string bytes = ReadAll(path);
+std::string FileSha256(const std::string& path) { return Sha256Hex(ReadAll(path)); }
+
+std::string Sha256Hex(const std::string& bytes) {
   unsigned char md[EVP_MAX_MD_SIZE];
   unsigned int len = 0;
   if (EVP_Digest(bytes.data(), bytes.size(), md, &len, EVP_sha256(), nullptr) != 1) {
-    throw std::runtime_error(path + ": SHA-256 failed");
+    throw std::runtime_error("SHA-256 failed");
   }
   static const char* hex = "0123456789abcdef";
   std::string out;

@@ -37,8 +37,9 @@ proto::BankState CaptureState(const HumanoidChairEnv& env);
 EnvState EnvStateOf(const proto::BankState& b);
 HumanoidState HumanoidStateOf(const proto::BankState& b);
 
-// SHA-256 of a file's bytes, hex.
+// SHA-256 of a file's bytes / of `bytes`, hex.
 std::string FileSha256(const std::string& path);
+std::string Sha256Hex(const std::string& bytes);
 
 struct SampleEndPosesOptions {
   int steps = 60;  // N: keep the state after exactly N control steps ...

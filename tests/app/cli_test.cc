@@ -4,11 +4,13 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 
 #include "common/json_util.h"
@@ -266,6 +268,71 @@ TEST_F(CliTest, MetaEvalLooksAheadForAMetaPolicyOnlyWhenAsked) {
   EXPECT_EQ(j["lookahead"]["trials_as_predicted"].get<int>(),
             j["lookahead"]["trials_predicted"].get<int>());
   EXPECT_GE(j["lookahead"]["rollouts_per_trial"].get<double>(), 2.0);
+}
+
+// A long evaluation in pieces: --records resumes a killed run (its torn last line dropped) and
+// shards (--first-trial) merge (perch eval-merge), both to the result of one run; records of
+// other trials, overlapping shards and a gap are refused by name, and nothing saved is lost.
+TEST_F(CliTest, MetaEvalResumesFromItsRecordsAndShardsMergeToOneRun) {
+  const std::string src = PERCH_SOURCE_DIR;
+  const std::string dir = ::testing::TempDir() + "perch_eval_records/";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string base = "eval --task sit_chair --model " + src +
+                           "/models/sit_chair/policy.bin --zone 2 --seed 5 --threads 2 --json ";
+  Result r = Perch(base + "--trials 6", false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Json one = Json::parse(r.out);
+  auto same = [&](const Json& j) {
+    for (const char* k : {"trials", "first_trial", "success_rate", "success_ci95",
+                          "min_dist_mean_m", "min_dist_std_m", "fall_rate", "transitions",
+                          "sequences", "by_side", "handover_values", "model", "seed", "zone"}) {
+      EXPECT_EQ(j[k], one[k]) << k;
+    }
+  };
+  // A run of 4 of the 6, killed mid-line, then resumed to 6: only the missing trials run.
+  const std::string rec = dir + "resumed.jsonl";
+  ASSERT_EQ(Perch(base + "--trials 4 --records " + rec, false).code, 0);
+  std::string text;
+  {
+    std::ifstream f(rec, std::ios::binary);
+    text.assign(std::istreambuf_iterator<char>(f), {});
+  }
+  ASSERT_EQ(std::count(text.begin(), text.end(), '\n'), 5) << text;  // the header and 4 trials
+  { std::ofstream(rec, std::ios::binary) << text.substr(0, text.size() - 30); }
+  r = Perch(base + "--trials 6 --records " + rec);
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_TRUE(Has(r.out, "cut short")) << r.out;
+  EXPECT_TRUE(Has(r.out, "3 of 6 trials already run")) << r.out;
+  const Json resumed = Json::parse(r.out.substr(r.out.find("{\"")));
+  EXPECT_EQ(resumed["resumed_trials"], 3);
+  same(resumed);
+  // Other trials (another seed, another zone) are refused, naming the field; the file is kept.
+  const auto size = std::filesystem::file_size(rec);
+  r = Perch("eval --task sit_chair --model " + src +
+            "/models/sit_chair/policy.bin --zone 2 --seed 6 --trials 6 --records " + rec);
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "another \"seed\" (5, now 6)")) << r.out;
+  r = Perch("eval --task sit_chair --model " + src +
+            "/models/sit_chair/policy.bin --zone 1 --seed 5 --trials 6 --records " + rec);
+  EXPECT_TRUE(Has(r.out, "another \"env.spawn.zone\" (2, now 1)")) << r.out;
+  r = Perch(base + "--trials 3 --records " + rec);
+  EXPECT_TRUE(Has(r.out, "outside this run's trials 0 .. 2")) << r.out;
+  EXPECT_EQ(std::filesystem::file_size(rec), size);
+  // Two shards merge to the one run; a shard twice or a gap is refused.
+  const std::string a = dir + "a.jsonl", b = dir + "b.jsonl";
+  ASSERT_EQ(Perch(base + "--trials 2 --records " + a, false).code, 0);
+  ASSERT_EQ(Perch(base + "--trials 4 --first-trial 2 --records " + b, false).code, 0);
+  r = Perch("eval-merge " + b + " " + a + " --json", false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  same(Json::parse(r.out));
+  r = Perch("eval-merge " + a + " " + rec);
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "overlapping shards")) << r.out;
+  ASSERT_EQ(Perch(base + "--trials 2 --first-trial 4 --records " + dir + "c.jsonl", false).code, 0);
+  r = Perch("eval-merge " + a + " " + dir + "c.jsonl");
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "lack 2, the first 2")) << r.out;
 }
 
 TEST_F(CliTest, MetaEvalSavesTheHandOversToATurnOrTheWalkerAsABankTheyStartFrom) {

@@ -2,7 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <fstream>
+#include <set>
 
 #include "common/paths.h"
 #include "learner/ppo.h"
@@ -483,6 +486,99 @@ TEST(MetaEnv, LoadsTheConfiguredSubtasksAndTheWalkerWalksToATarget) {
 // switches the delayed switches are simulated too; the simulator is exact (every trial ends as
 // its last look ahead predicted) and no trial ends worse than the policy alone would have from
 // its first switch on.
+// Every aggregate key of an evaluation's JSON (all but `threads`, which says how it ran).
+void ExpectSameResult(const Json& a, const Json& b) {
+  std::set<std::string> keys;
+  for (const auto& [k, v] : a.items()) keys.insert(k);
+  for (const auto& [k, v] : b.items()) keys.insert(k);
+  keys.erase("threads");
+  for (const std::string& k : keys) {
+    ASSERT_TRUE(a.contains(k) && b.contains(k)) << k;
+    EXPECT_EQ(a[k], b[k]) << k;
+  }
+}
+
+// `perch eval --records` / `--first-trial` / `perch eval-merge`: trials saved one per line and
+// read back, from shards or a resumed run, give exactly the result of one run of all of them.
+TEST(MetaEval, ShardsAndResumedRecordsGiveTheResultOfOneRun) {
+  const TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"});
+  const proto::ModelWeights meta = UntrainedMeta(5);
+  const std::vector<FrozenPolicyData> frozen = Untrained();
+  MetaEvalOptions o;
+  o.trials = 6;
+  o.seed = 11;
+  o.stochastic = true;  // untrained: sampled, so the trials differ
+  o.threads = 2;
+  const Json one = EvaluateMeta(c, meta, frozen, o);
+  EXPECT_EQ(one["first_trial"], 0);
+  // Two shards of three, their records through JSON lines and back.
+  std::vector<MetaTrialRecord> records;
+  o.on_record = [&](const MetaTrialRecord& r) {
+    records.push_back(MetaTrialRecord::FromJson(Json::parse(r.ToJson().dump()), "line"));
+  };
+  o.trials = 3;
+  const Json first = EvaluateMeta(c, meta, frozen, o);
+  o.first_trial = 3;
+  const Json second = EvaluateMeta(c, meta, frozen, o);
+  EXPECT_EQ(first["trials"], 3);
+  EXPECT_EQ(second["first_trial"], 3);
+  ASSERT_EQ(records.size(), 6u);
+  const Json header = MetaEvalHeader(c, meta, frozen, o);
+  ExpectSameResult(AggregateMeta(header, records), one);
+  // Resumed with two trials already run: only the other four run, and the result is the same.
+  o.first_trial = 0;
+  o.trials = 6;
+  std::sort(records.begin(), records.end(),
+            [](const MetaTrialRecord& a, const MetaTrialRecord& b) { return a.trial < b.trial; });
+  o.done = {records[1], records[4]};
+  int ran = 0;
+  o.on_record = [&](const MetaTrialRecord& r) {
+    ++ran;
+    EXPECT_NE(r.trial, 1);
+    EXPECT_NE(r.trial, 4);
+  };
+  ExpectSameResult(EvaluateMeta(c, meta, frozen, o), one);
+  EXPECT_EQ(ran, 4);
+  // A record outside the trials, or twice, is refused by name; so is aggregating a trial twice.
+  o.done = {records[1]};
+  o.done[0].trial = 6;
+  EXPECT_THROW(EvaluateMeta(c, meta, frozen, o), ConfigError);
+  o.done = {records[1], records[1]};
+  EXPECT_THROW(EvaluateMeta(c, meta, frozen, o), ConfigError);
+  EXPECT_THROW(AggregateMeta(header, {records[0], records[0]}), ConfigError);
+  // The header tells other trials apart, naming the field; where the files were does not count.
+  o.seed = 12;
+  Json moved = header;
+  moved["about"] = {{"model", "elsewhere.bin"}};
+  EXPECT_EQ(FirstHeaderDifference(header, moved), "");
+  EXPECT_EQ(FirstHeaderDifference(header, MetaEvalHeader(c, meta, frozen, o)), "seed");
+  TaskEnvConfig c2 = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"}, 2);
+  EXPECT_EQ(FirstHeaderDifference(header, MetaEvalHeader(c2, meta, frozen, o)), "env.spawn.zone");
+  EXPECT_EQ(FirstHeaderDifference(header, MetaEvalHeader(c, UntrainedMeta(6), frozen, o)),
+            "meta_sha256");
+
+  // The file: a torn last line (a killed run) is left out; a bad line elsewhere is refused by
+  // file and line.
+  const std::string path = ::testing::TempDir() + "perch_meta_records.jsonl";
+  std::string text = MetaRecordsHeaderLine(header) + "\n";
+  for (const MetaTrialRecord& r : records) text += r.ToJson().dump() + "\n";
+  { std::ofstream(path, std::ios::binary) << text << records[0].ToJson().dump().substr(0, 20); }
+  MetaRecordsFile f = ReadMetaRecords(path);
+  EXPECT_TRUE(f.torn_tail);
+  EXPECT_EQ(f.header, header);
+  ExpectSameResult(AggregateMeta(f.header, f.records), one);
+  { std::ofstream(path, std::ios::binary) << text << "{\"trial\": 9}\n"; }
+  try {
+    ReadMetaRecords(path);
+    ADD_FAILURE() << "a record without its fields was read";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find(path + ":8: no \"success\""), std::string::npos)
+        << e.what();
+  }
+  { std::ofstream(path, std::ios::binary) << "not json\n"; }
+  EXPECT_THROW(ReadMetaRecords(path), ConfigError);
+}
+
 TEST(MetaEval, TheMetaPolicyWithLookaheadIsExactAndNoWorseThanAlone) {
   const std::string model = ResolveProjectPath("models/sit_chair/policy.bin");
   TaskEnvConfig c = TaskEnvConfig::FromJson(SavedConfig(model)["env"], "saved");
@@ -523,7 +619,12 @@ TEST(MetaEval, TheMetaPolicyWithLookaheadIsExactAndNoWorseThanAlone) {
   o.policy_lookahead.lookahead_straight_s = {0.5};
   o.policy_lookahead.lookahead_detour_deg = {-60.0, 60.0};
   o.policy_lookahead.lookahead_rank = "nearer";
+  std::vector<MetaTrialRecord> records;  // the lookahead's counts survive the records too
+  o.on_record = [&](const MetaTrialRecord& r) {
+    records.push_back(MetaTrialRecord::FromJson(Json::parse(r.ToJson().dump()), "line"));
+  };
   const Json near = EvaluateMeta(c, meta, frozen, o);
+  ExpectSameResult(AggregateMeta(MetaEvalHeader(c, meta, frozen, o), records), near);
   EXPECT_EQ(near["lookahead_rank"], "nearer");
   EXPECT_EQ(near["lookahead_sides"], true);
   EXPECT_EQ(near["lookahead_straight_s"], Json({0.5}));
