@@ -49,5 +49,26 @@ TEST(K8sManifests, ActorPortsMatchLearnerBindsAndService) {
   EXPECT_NE(actors.find("\"--learner-host\", \"" + std::string(m[1]) + "\""), std::string::npos);
 }
 
+// The sharded evaluation covers each of its trials once: shard i starts at i x its trial count,
+// the shards together run the paper's 10,000, and each writes its own records file.
+TEST(K8sManifests, EvalShardsCoverTheTrialsOnceEach) {
+  const std::string yaml = Read("k8s/eval-shards.yaml");
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(yaml, m, std::regex(R"re(completions: (\d+))re")));
+  const int shards = std::stoi(m[1]);
+  ASSERT_TRUE(std::regex_search(yaml, m, std::regex(R"re(--trials (\d+))re")));
+  const int per_shard = std::stoi(m[1]);
+  ASSERT_TRUE(std::regex_search(
+      yaml, m, std::regex(R"re(--first-trial \$\(\(JOB_COMPLETION_INDEX \* (\d+)\)\))re")));
+  EXPECT_EQ(std::stoi(m[1]), per_shard);
+  EXPECT_EQ(shards * per_shard, 10000);
+  EXPECT_NE(yaml.find("completionMode: Indexed"), std::string::npos);
+  EXPECT_TRUE(std::regex_search(yaml, std::regex(R"re(--records \S*\$JOB_COMPLETION_INDEX)re")));
+  // The volume the pods write is the claim the file declares.
+  ASSERT_TRUE(std::regex_search(yaml, m, std::regex(R"re(claimName: (\S+))re")));
+  EXPECT_TRUE(std::regex_search(
+      yaml, std::regex("kind: PersistentVolumeClaim\\s+metadata:\\s+name: " + std::string(m[1]))));
+}
+
 }  // namespace
 }  // namespace perch
