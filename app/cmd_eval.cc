@@ -964,6 +964,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
   struct MergeOpts {
     std::vector<std::string> files;
     std::string matrix_png;
+    int trials = 0;  // only the first N trials (0: all)
     bool json = false;
   };
   auto mg = std::make_shared<MergeOpts>();
@@ -976,6 +977,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       ->expected(1, 1 << 16);
   me->add_option("--matrix-png", mg->matrix_png,
                  "draw the subtask transition matrices (per start side) here");
+  me->add_option("--trials", mg->trials,
+                 "only the first N trials (from the lowest), e.g. a figure so far from a run that "
+                 "is still going (0: all; they must all be there)")
+      ->check(CLI::Range(0, 100000000));
   me->add_flag("--json", mg->json, "print one JSON object on stdout");
   me->callback([mg]() {
     Json header;
@@ -1004,8 +1009,21 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       }
     }
     if (all.empty()) throw ConfigError("eval-merge: the records hold no trials");
+    const int lo = owner.begin()->first;
+    if (mg->trials > 0) {
+      all.erase(
+          std::remove_if(all.begin(), all.end(),
+                         [&](const MetaTrialRecord& r) { return r.trial >= lo + mg->trials; }),
+          all.end());
+      owner.erase(owner.lower_bound(lo + mg->trials), owner.end());
+      if (static_cast<int>(all.size()) < mg->trials) {
+        throw ConfigError("eval-merge --trials " + std::to_string(mg->trials) + ": the records " +
+                          "hold " + std::to_string(all.size()) + " of trials " +
+                          std::to_string(lo) + " .. " + std::to_string(lo + mg->trials - 1));
+      }
+    }
     // Contiguous trials only: a gap is a shard not run (or not finished).
-    const int lo = owner.begin()->first, hi = owner.rbegin()->first;
+    const int hi = owner.rbegin()->first;
     if (hi - lo + 1 != static_cast<int>(all.size())) {
       int missing = lo;
       while (owner.count(missing)) ++missing;

@@ -321,11 +321,21 @@ TEST_F(CliTest, MetaEvalResumesFromItsRecordsAndShardsMergeToOneRun) {
   EXPECT_EQ(std::filesystem::file_size(rec), size);
   // Two shards merge to the one run; a shard twice or a gap is refused.
   const std::string a = dir + "a.jsonl", b = dir + "b.jsonl";
-  ASSERT_EQ(Perch(base + "--trials 2 --records " + a, false).code, 0);
+  r = Perch(base + "--trials 2 --records " + a, false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Json first_two = Json::parse(r.out);
   ASSERT_EQ(Perch(base + "--trials 4 --first-trial 2 --records " + b, false).code, 0);
   r = Perch("eval-merge " + b + " " + a + " --json", false);
   ASSERT_EQ(r.code, 0) << r.out;
   same(Json::parse(r.out));
+  // The first N of the merged trials: the figure so far of a run still going.
+  r = Perch("eval-merge " + b + " " + a + " --trials 2 --json", false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  for (const char* k : {"trials", "success_rate", "min_dist_mean_m", "transitions"}) {
+    EXPECT_EQ(Json::parse(r.out)[k], first_two[k]) << k;
+  }
+  r = Perch("eval-merge " + b + " " + a + " --trials 7");
+  EXPECT_TRUE(Has(r.out, "hold 6 of trials 0 .. 6")) << r.out;
   r = Perch("eval-merge " + a + " " + rec);
   EXPECT_NE(r.code, 0);
   EXPECT_TRUE(Has(r.out, "overlapping shards")) << r.out;
