@@ -213,35 +213,21 @@ Json MetaTrialRecord::ToJson() const {
   return j;
 }
 
-namespace {
-
-template <typename T>
-void Field(const Json& j, const char* key, T* out, const std::string& where) {
-  if (!j.contains(key)) throw ConfigError(where + ": no \"" + key + "\"");
-  try {
-    *out = j.at(key).get<T>();
-  } catch (const Json::exception&) {
-    throw ConfigError(where + ": \"" + key + "\" has the wrong type: " + j.at(key).dump());
-  }
-}
-
-}  // namespace
-
 MetaTrialRecord MetaTrialRecord::FromJson(const Json& j, const std::string& where) {
   if (!j.is_object()) throw ConfigError(where + ": not a JSON object");
   MetaTrialRecord r;
-  Field(j, "trial", &r.trial, where);
+  GetRequired(j, "trial", r.trial, where);
   if (r.trial < 0) throw ConfigError(where + ": \"trial\" " + std::to_string(r.trial) + " < 0");
-  Field(j, "success", &r.success, where);
-  Field(j, "fell", &r.fell, where);
-  Field(j, "min_dist_m", &r.min_dist_m, where);
-  Field(j, "time_to_sit_s", &r.time_to_sit_s, where);
-  Field(j, "pos_err_m", &r.pos_err_m, where);
-  Field(j, "height_m", &r.height_m, where);
-  Field(j, "yaw_err_rad", &r.yaw_err_rad, where);
-  Field(j, "spawn_theta", &r.spawn_theta, where);
-  Field(j, "sequence", &r.sequence, where);
-  Field(j, "begin_value", &r.begin_value, where);
+  GetRequired(j, "success", r.success, where);
+  GetRequired(j, "fell", r.fell, where);
+  GetRequired(j, "min_dist_m", r.min_dist_m, where);
+  GetRequired(j, "time_to_sit_s", r.time_to_sit_s, where);
+  GetRequired(j, "pos_err_m", r.pos_err_m, where);
+  GetRequired(j, "height_m", r.height_m, where);
+  GetRequired(j, "yaw_err_rad", r.yaw_err_rad, where);
+  GetRequired(j, "spawn_theta", r.spawn_theta, where);
+  GetRequired(j, "sequence", r.sequence, where);
+  GetRequired(j, "begin_value", r.begin_value, where);
   for (int id : r.sequence) {
     if (id < 0 || id >= kNumSubtasks) {
       throw ConfigError(where + ": \"sequence\" holds " + std::to_string(id) + ", not a subtask");
@@ -252,13 +238,13 @@ MetaTrialRecord MetaTrialRecord::FromJson(const Json& j, const std::string& wher
     const std::string w = where + ".lookahead";
     if (!l.is_object()) throw ConfigError(w + ": not a JSON object");
     r.has_lookahead = true;
-    Field(l, "points", &r.la_points, w);
-    Field(l, "rollouts", &r.la_rollouts, w);
-    Field(l, "changed", &r.la_changed, w);
-    Field(l, "predicted_any", &r.la_predicted_any, w);
-    Field(l, "rules_success", &r.la_rules_success, w);
-    Field(l, "as_predicted", &r.la_as_predicted, w);
-    Field(l, "not_worse", &r.la_not_worse, w);
+    GetRequired(l, "points", r.la_points, w);
+    GetRequired(l, "rollouts", r.la_rollouts, w);
+    GetRequired(l, "changed", r.la_changed, w);
+    GetRequired(l, "predicted_any", r.la_predicted_any, w);
+    GetRequired(l, "rules_success", r.la_rules_success, w);
+    GetRequired(l, "as_predicted", r.la_as_predicted, w);
+    GetRequired(l, "not_worse", r.la_not_worse, w);
   }
   return r;
 }

@@ -572,7 +572,8 @@ TEST(MetaEval, ShardsAndResumedRecordsGiveTheResultOfOneRun) {
     ReadMetaRecords(path);
     ADD_FAILURE() << "a record without its fields was read";
   } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find(path + ":8: no \"success\""), std::string::npos)
+    EXPECT_NE(std::string(e.what()).find(path + ":8: missing required field 'success'"),
+              std::string::npos)
         << e.what();
   }
   { std::ofstream(path, std::ios::binary) << "not json\n"; }
