@@ -551,66 +551,24 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         }
         if (!o->save_sit_starts.empty()) mo.sit_starts = &sit_starts;
         if (!o->save_failed_sit_starts.empty()) mo.failed_sit_starts = &failed_sit_starts;
-        // The records file: made here with its header, or resumed (same header: the same
-        // trials) with its torn last line, if any, dropped; then appended to as trials finish.
-        std::ofstream records;
+        // The records file: made with its header, or resumed (the same header: the same
+        // trials); appended to as trials finish (tasks/meta_eval.h).
+        MetaRecordsWriter records;
         int resumed = 0;
         if (!o->records.empty()) {
           Json header = MetaEvalHeader(mc, meta_weights, frozen, mo);
           header["about"] = {{"model", o->planner ? Json("planner") : Json(model_file)},
                              {"start_bank", o->start_bank}};
-          const std::string& path = o->records;
-          if (std::filesystem::exists(path)) {
-            MetaRecordsFile f = ReadMetaRecords(path);
-            const std::string diff = FirstHeaderDifference(f.header, header);
-            if (!diff.empty()) {
-              auto brief = [](const Json& h, const std::string& path) {
-                // The value at a dotted path ("env.spawn.zone").
-                const Json* at = &h;
-                for (size_t b = 0; b <= path.size();) {
-                  const size_t e = std::min(path.find('.', b), path.size());
-                  const std::string k = path.substr(b, e - b);
-                  if (!at->is_object() || !at->contains(k)) return std::string("(none)");
-                  at = &(*at)[k];
-                  b = e + 1;
-                }
-                const std::string v = at->dump();
-                return v.size() > 80 ? v.substr(0, 77) + "..." : v;
-              };
-              throw ConfigError("--records " + path + ": its trials were run with another \"" +
-                                diff + "\" (" + brief(f.header, diff) + ", now " +
-                                brief(header, diff) +
-                                "); name a new file, or the same model, config and flags");
-            }
-            for (const MetaTrialRecord& r : f.records) {
-              if (r.trial < mo.first_trial || r.trial >= mo.first_trial + mo.trials) {
-                throw ConfigError("--records " + path + ": holds trial " + std::to_string(r.trial) +
-                                  ", outside this run's trials " + std::to_string(mo.first_trial) +
-                                  " .. " + std::to_string(mo.first_trial + mo.trials - 1) +
-                                  " (--first-trial / --trials)");
-              }
-            }
-            if (f.torn_tail) {
-              std::cerr << "eval: " << path << ": its last line was cut short (a killed run); "
-                        << "that trial runs again\n";
-              std::string bytes = MetaRecordsHeaderLine(f.header) + "\n";
-              for (const MetaTrialRecord& r : f.records) bytes += r.ToJson().dump() + "\n";
-              WriteFileAtomic(path, bytes);
-            }
-            resumed = static_cast<int>(f.records.size());
-            std::cerr << "eval: " << path << ": " << resumed << " of " << mo.trials
-                      << " trials already run; resuming\n";
-            mo.done = std::move(f.records);
-          } else {
-            WriteFileAtomic(path, MetaRecordsHeaderLine(header) + "\n");
+          const MetaRecordsWriter::Opened r = records.Open(o->records, header, &mo);
+          if (r.torn_tail) {
+            std::cerr << "eval: " << o->records << ": its last line was cut short (a killed "
+                      << "run); that trial runs again\n";
           }
-          records.open(path, std::ios::app | std::ios::binary);
-          if (!records) throw ConfigError("--records " + path + ": cannot open for appending");
-          mo.on_record = [&records, path](const MetaTrialRecord& r) {
-            records << r.ToJson().dump() << "\n";
-            records.flush();
-            if (!records) throw std::runtime_error("--records " + path + ": write failed");
-          };
+          resumed = r.resumed;
+          if (resumed > 0) {
+            std::cerr << "eval: " << o->records << ": " << resumed << " of " << mo.trials
+                      << " trials already run; resuming\n";
+          }
         }
         const auto t0 = std::chrono::steady_clock::now();
         const int every = std::max(1, mo.trials / 20);

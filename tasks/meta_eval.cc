@@ -1,14 +1,21 @@
 #include "tasks/meta_eval.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <mutex>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include "learner/policy.h"
@@ -405,12 +412,20 @@ std::string MetaRecordsHeaderLine(const Json& header) {
 MetaRecordsFile ReadMetaRecords(const std::string& path) {
   std::ifstream f(path, std::ios::binary);
   if (!f) throw ConfigError(path + ": cannot open the records file");
+  std::ostringstream ss;
+  ss << f.rdbuf();
+  return ParseMetaRecords(ss.str(), path);
+}
+
+MetaRecordsFile ParseMetaRecords(const std::string& text, const std::string& path) {
   std::vector<std::string> lines;
-  std::string line;
-  bool ends_with_newline = true;
-  while (std::getline(f, line)) {
-    ends_with_newline = !f.eof();
-    lines.push_back(line);
+  std::vector<size_t> ends;  // the byte after each complete line's newline
+  size_t at = 0;
+  while (at < text.size()) {
+    const size_t nl = text.find('\n', at);
+    lines.push_back(text.substr(at, nl == std::string::npos ? std::string::npos : nl - at));
+    ends.push_back(nl == std::string::npos ? std::string::npos : nl + 1);
+    at = nl == std::string::npos ? text.size() : nl + 1;
   }
   MetaRecordsFile out;
   if (lines.empty()) throw ConfigError(path + ": empty, not a records file (perch eval --records)");
@@ -426,20 +441,23 @@ MetaRecordsFile ReadMetaRecords(const std::string& path) {
                       ":1: not a records file (perch eval --records): the header lacks "
                       "\"perch_meta_eval_records\": 1 and its \"header\"");
   }
+  if (ends[0] == std::string::npos) {
+    throw ConfigError(path + ":1: the header line has no end (a records file is one per line)");
+  }
   out.header = head["header"];
+  out.complete_bytes = ends[0];
   std::set<int> seen;
   for (size_t i = 1; i < lines.size(); ++i) {
     const std::string where = path + ":" + std::to_string(i + 1);
-    const bool last = i + 1 == lines.size();
+    // A run killed mid-write leaves its last line without its newline: that trial runs again.
+    if (ends[i] == std::string::npos) {
+      out.torn_tail = true;
+      break;
+    }
     Json j;
     try {
       j = Json::parse(lines[i]);
     } catch (const Json::exception&) {
-      // A run killed mid-write leaves its last line short: that trial runs again.
-      if (last && !ends_with_newline) {
-        out.torn_tail = true;
-        break;
-      }
       throw ConfigError(where + ": not JSON (a records file is corrupt; nothing was changed)");
     }
     MetaTrialRecord r = MetaTrialRecord::FromJson(j, where);
@@ -447,8 +465,103 @@ MetaRecordsFile ReadMetaRecords(const std::string& path) {
       throw ConfigError(where + ": trial " + std::to_string(r.trial) + " twice");
     }
     out.records.push_back(std::move(r));
+    out.complete_bytes = ends[i];
   }
   return out;
+}
+
+namespace {
+
+// The value at a dotted path of `h` ("env.spawn.zone"), shortened, for a refusal.
+std::string BriefAt(const Json& h, const std::string& path) {
+  const Json* at = &h;
+  for (size_t b = 0; b <= path.size();) {
+    const size_t e = std::min(path.find('.', b), path.size());
+    const std::string k = path.substr(b, e - b);
+    if (!at->is_object() || !at->contains(k)) return "(none)";
+    at = &(*at)[k];
+    b = e + 1;
+  }
+  const std::string v = at->dump();
+  return v.size() > 80 ? v.substr(0, 77) + "..." : v;
+}
+
+}  // namespace
+
+MetaRecordsWriter::~MetaRecordsWriter() {
+  if (fd_ >= 0) ::close(fd_);  // releases the lock
+}
+
+void MetaRecordsWriter::Append(const std::string& line) {
+  size_t done = 0;
+  while (done < line.size()) {
+    const ssize_t n = ::write(fd_, line.data() + done, line.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      throw std::runtime_error("--records " + path_ + ": write failed: " + std::strerror(errno));
+    }
+    done += static_cast<size_t>(n);
+  }
+}
+
+MetaRecordsWriter::Opened MetaRecordsWriter::Open(const std::string& path, const Json& header,
+                                                  MetaEvalOptions* o) {
+  const std::string ctx = "--records " + path;
+  path_ = path;
+  // One inode for the whole run (no rename), locked, so that a second evaluation on the same
+  // file cannot interleave its trials or cut this one's line.
+  fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  if (fd_ < 0) throw ConfigError(ctx + ": cannot open: " + std::strerror(errno));
+  if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+    throw ConfigError(ctx +
+                      ": in use by another evaluation (locked); wait for it or name "
+                      "another file");
+  }
+  std::string text;
+  {
+    char buf[1 << 16];
+    off_t off = 0;
+    for (;;) {
+      const ssize_t n = ::pread(fd_, buf, sizeof(buf), off);
+      if (n < 0 && errno == EINTR) continue;
+      if (n < 0) throw ConfigError(ctx + ": cannot read: " + std::strerror(errno));
+      if (n == 0) break;
+      text.append(buf, static_cast<size_t>(n));
+      off += n;
+    }
+  }
+  Opened opened;
+  // Empty, or a header cut short before its newline (killed while making it): a new file.
+  if (text.empty() || text.find('\n') == std::string::npos) {
+    if (!text.empty() && ::ftruncate(fd_, 0) != 0) {
+      throw ConfigError(ctx + ": cannot truncate: " + std::strerror(errno));
+    }
+    Append(MetaRecordsHeaderLine(header) + "\n");
+  } else {
+    MetaRecordsFile f = ParseMetaRecords(text, path);
+    const std::string diff = FirstHeaderDifference(f.header, header);
+    if (!diff.empty()) {
+      throw ConfigError(ctx + ": its trials were run with another \"" + diff + "\" (" +
+                        BriefAt(f.header, diff) + ", now " + BriefAt(header, diff) +
+                        "); name a new file, or the same model, config and flags");
+    }
+    for (const MetaTrialRecord& r : f.records) {
+      if (r.trial < o->first_trial || r.trial >= o->first_trial + o->trials) {
+        throw ConfigError(ctx + ": holds trial " + std::to_string(r.trial) +
+                          ", outside this run's trials " + std::to_string(o->first_trial) + " .. " +
+                          std::to_string(o->first_trial + o->trials - 1) +
+                          " (--first-trial / --trials)");
+      }
+    }
+    if (f.torn_tail && ::ftruncate(fd_, static_cast<off_t>(f.complete_bytes)) != 0) {
+      throw ConfigError(ctx + ": cannot cut its torn last line: " + std::strerror(errno));
+    }
+    opened.resumed = static_cast<int>(f.records.size());
+    opened.torn_tail = f.torn_tail;
+    o->done = std::move(f.records);
+  }
+  o->on_record = [this](const MetaTrialRecord& r) { Append(r.ToJson().dump() + "\n"); };
+  return opened;
 }
 
 std::string FirstHeaderDifference(const Json& a, const Json& b) {

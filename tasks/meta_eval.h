@@ -108,12 +108,39 @@ Json AggregateMeta(const Json& header, std::vector<MetaTrialRecord> records);
 struct MetaRecordsFile {
   Json header;
   std::vector<MetaTrialRecord> records;
-  bool torn_tail = false;  // the last line was cut short (a killed run) and is left out
+  bool torn_tail = false;     // the last line was cut short (a killed run) and is left out
+  size_t complete_bytes = 0;  // the bytes up to the end of the last complete line
 };
 // ConfigError naming the file and line: no header, a malformed line other than the last, a trial
 // twice.
 MetaRecordsFile ReadMetaRecords(const std::string& path);
+MetaRecordsFile ParseMetaRecords(const std::string& text, const std::string& path);
 std::string MetaRecordsHeaderLine(const Json& header);
+
+// The records file of one running evaluation. Open() locks the file (a second evaluation on it is
+// refused while this one runs), writes the header into a new (or empty) file, or reads an
+// existing one: its header must equal `header` but for "about" (else ConfigError naming the first
+// field that differs, with both values), its trials must lie in `o`'s, and a last line cut short
+// by a killed run is cut off in place. Its trials go into o->done; o->on_record then appends each
+// new trial (one line, flushed). Nothing recorded is removed or rewritten. Keep the writer alive
+// until the evaluation returns.
+class MetaRecordsWriter {
+ public:
+  struct Opened {
+    int resumed = 0;         // trials already in the file
+    bool torn_tail = false;  // a cut-short last line was dropped
+  };
+  MetaRecordsWriter() = default;
+  MetaRecordsWriter(const MetaRecordsWriter&) = delete;
+  MetaRecordsWriter& operator=(const MetaRecordsWriter&) = delete;
+  ~MetaRecordsWriter();
+  Opened Open(const std::string& path, const Json& header, MetaEvalOptions* o);
+
+ private:
+  void Append(const std::string& line);
+  int fd_ = -1;
+  std::string path_;
+};
 // The first key whose value differs between two headers ("" when equal), for the refusal; "about"
 // (the model's and bank's paths, which differ between machines) is not compared.
 std::string FirstHeaderDifference(const Json& a, const Json& b);

@@ -4,7 +4,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <set>
 
 #include "common/paths.h"
@@ -567,6 +569,50 @@ TEST(MetaEval, ShardsAndResumedRecordsGiveTheResultOfOneRun) {
   EXPECT_TRUE(f.torn_tail);
   EXPECT_EQ(f.header, header);
   ExpectSameResult(AggregateMeta(f.header, f.records), one);
+  {
+    // The writer resumes it: the torn line is cut in place, the trials come back as done, new
+    // ones are appended after them; a second writer is refused while the first holds the file.
+    MetaEvalOptions w;
+    w.trials = 6;
+    MetaRecordsWriter writer;
+    const MetaRecordsWriter::Opened opened = writer.Open(path, header, &w);
+    EXPECT_TRUE(opened.torn_tail);
+    EXPECT_EQ(opened.resumed, 6);
+    EXPECT_EQ(w.done.size(), 6u);
+    MetaEvalOptions w2 = w;
+    MetaRecordsWriter second;
+    try {
+      second.Open(path, header, &w2);
+      ADD_FAILURE() << "a second writer opened a file in use";
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find("in use by another evaluation"), std::string::npos)
+          << e.what();
+    }
+    ASSERT_TRUE(w.on_record);
+    w.on_record(records[2]);
+    std::ifstream in(path, std::ios::binary);
+    const std::string now((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    EXPECT_EQ(now, text + records[2].ToJson().dump() + "\n");
+  }
+  {
+    // Released (and its extra line gone), the file is refused for another seed's trials, naming the
+    // field and both values, and left as it was.
+    MetaEvalOptions w;
+    w.trials = 7;
+    Json other = header;
+    other["seed"] = 12;
+    { std::ofstream(path, std::ios::binary) << text; }
+    const auto size = std::filesystem::file_size(path);
+    MetaRecordsWriter writer;
+    try {
+      writer.Open(path, other, &w);
+      ADD_FAILURE() << "records of another seed were resumed";
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find("another \"seed\" (11, now 12)"), std::string::npos)
+          << e.what();
+    }
+    EXPECT_EQ(std::filesystem::file_size(path), size);
+  }
   { std::ofstream(path, std::ios::binary) << text << "{\"trial\": 9}\n"; }
   try {
     ReadMetaRecords(path);
