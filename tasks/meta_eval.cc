@@ -540,7 +540,14 @@ MetaRecordsWriter::Opened MetaRecordsWriter::Open(const std::string& path, const
   } else {
     MetaRecordsFile f = ParseMetaRecords(text, path);
     const std::string diff = FirstHeaderDifference(f.header, header);
-    if (!diff.empty()) {
+    if (!diff.empty() && f.records.empty() && !f.torn_tail) {
+      // A header and no trial (a run refused or killed before its first trial ended): nothing
+      // to keep, so this run's header replaces it.
+      if (::ftruncate(fd_, 0) != 0) {
+        throw ConfigError(ctx + ": cannot truncate: " + std::strerror(errno));
+      }
+      Append(MetaRecordsHeaderLine(header) + "\n");
+    } else if (!diff.empty()) {
       throw ConfigError(ctx + ": its trials were run with another \"" + diff + "\" (" +
                         BriefAt(f.header, diff) + ", now " + BriefAt(header, diff) +
                         "); name a new file, or the same model, config and flags");

@@ -120,7 +120,8 @@ std::string MetaRecordsHeaderLine(const Json& header);
 // The records file of one running evaluation. Open() locks the file (a second evaluation on it is
 // refused while this one runs), writes the header into a new (or empty) file, or reads an
 // existing one: its header must equal `header` but for "about" (else ConfigError naming the first
-// field that differs, with both values), its trials must lie in `o`'s, and a last line cut short
+// field that differs, with both values; a file of a header and no trial takes the new header),
+// its trials must lie in `o`'s, and a last line cut short
 // by a killed run is cut off in place. Its trials go into o->done; o->on_record then appends each
 // new trial (one line, flushed). Nothing recorded is removed or rewritten. Keep the writer alive
 // until the evaluation returns.

@@ -613,6 +613,18 @@ TEST(MetaEval, ShardsAndResumedRecordsGiveTheResultOfOneRun) {
     }
     EXPECT_EQ(std::filesystem::file_size(path), size);
   }
+  {
+    // A header and no trial (a run refused before its first trial ended) holds nothing to keep:
+    // another run's header replaces it.
+    { std::ofstream(path, std::ios::binary) << MetaRecordsHeaderLine(header) << "\n"; }
+    Json other = header;
+    other["seed"] = 12;
+    MetaEvalOptions w;
+    w.trials = 6;
+    MetaRecordsWriter writer;
+    EXPECT_EQ(writer.Open(path, other, &w).resumed, 0);
+    EXPECT_EQ(ReadMetaRecords(path).header, other);
+  }
   { std::ofstream(path, std::ios::binary) << text << "{\"trial\": 9}\n"; }
   try {
     ReadMetaRecords(path);
