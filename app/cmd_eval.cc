@@ -568,6 +568,16 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
           if (resumed > 0) {
             std::cerr << "eval: " << o->records << ": " << resumed << " of " << mo.trials
                       << " trials already run; resuming\n";
+            // The header holds what ran, not the code: say when the file's trials came from
+            // another build (the JSON's "builds" counts them).
+            int other = 0;
+            for (const MetaTrialRecord& t : mo.done) other += t.build != PerchVersion();
+            if (other > 0) {
+              std::cerr << "eval: " << o->records << ": " << other << " of its trials were run "
+                        << "by another build than this " << PerchVersion()
+                        << " (\"builds\" in the JSON); a change to the simulation between "
+                        << "them would mix two sets of trials\n";
+            }
           }
         }
         const auto t0 = std::chrono::steady_clock::now();

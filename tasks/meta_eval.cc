@@ -22,6 +22,7 @@
 #include "tasks/meta_env.h"
 #include "tasks/meta_expert.h"
 #include "tasks/meta_lookahead.h"
+#include "tasks/recording.h"
 #include "tasks/state_bank.h"
 #include "tasks/task_eval.h"
 #include "viz/canvas.h"
@@ -107,6 +108,7 @@ TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int tri
   rec.spawn_theta = e.spawn_theta;
   rec.sequence = e.sequence;
   rec.begin_value = e.begin_value;
+  rec.build = PerchVersion();
   out.sit_starts = std::move(sit_starts);
   if (d.lookahead != nullptr) {
     const LookaheadPlanner::Stats& st = d.lookahead->stats();
@@ -208,6 +210,7 @@ Json MetaTrialRecord::ToJson() const {
          {"spawn_theta", spawn_theta},
          {"sequence", sequence},
          {"begin_value", begin_value}};
+  if (!build.empty()) j["build"] = build;
   if (has_lookahead) {
     j["lookahead"] = {{"points", la_points},
                       {"rollouts", la_rollouts},
@@ -235,6 +238,7 @@ MetaTrialRecord MetaTrialRecord::FromJson(const Json& j, const std::string& wher
   GetRequired(j, "spawn_theta", r.spawn_theta, where);
   GetRequired(j, "sequence", r.sequence, where);
   GetRequired(j, "begin_value", r.begin_value, where);
+  GetOptional(j, "build", r.build, where);
   for (int id : r.sequence) {
     if (id < 0 || id >= kNumSubtasks) {
       throw ConfigError(where + ": \"sequence\" holds " + std::to_string(id) + ", not a subtask");
@@ -310,7 +314,9 @@ Json AggregateMeta(const Json& header, std::vector<MetaTrialRecord> results) {
   std::map<std::string, int> seq_count;
   std::map<std::string, std::array<int, 2>> seq_ends;      // sequence -> {successes, falls}
   std::map<std::string, std::array<int, 2>> side_success;  // side -> {successes, trials}
+  std::map<std::string, int> builds;                       // build -> trials it ran
   for (const MetaTrialRecord& r : results) {
+    builds[r.build.empty() ? "(not recorded)" : r.build] += 1;
     n_success += r.success;
     n_fell += r.fell;
     min_d.push_back(r.min_dist_m);
@@ -376,7 +382,10 @@ Json AggregateMeta(const Json& header, std::vector<MetaTrialRecord> results) {
                 {"time_to_sit_s_mean", MeanOf(t_sit)},
                 {"by_side", sides},
                 {"transitions", trans},
-                {"sequences", top}});
+                {"sequences", top},
+                // Which program ran the trials: more than one when a resumed evaluation spans
+                // builds (the header cannot see a code change).
+                {"builds", builds}});
   j["handover_values"] = HandoverValues(results);
   if (header.value("looks_ahead", false)) {
     // How much looking ahead was done and changed, and whether the simulator was exact (the

@@ -45,6 +45,10 @@ struct MetaTrialRecord {
   bool la_rules_success = false;  // the decider alone (from the first look ahead on) succeeded
   bool la_as_predicted = false;   // the outcome is the one the last look ahead predicted
   bool la_not_worse = false;      // ... and not worse than the decider alone
+  // The program that ran it (PerchVersion(): its commit). Records written before stop 42 have
+  // none (""). A resumed evaluation can span builds; the header cannot see a code change, so
+  // each trial says which build ran it and AggregateMeta counts them ("builds").
+  std::string build;
 
   Json ToJson() const;
   // ConfigError naming `where` and the field when a field is missing or of the wrong type.

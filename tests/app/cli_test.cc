@@ -299,13 +299,26 @@ TEST_F(CliTest, MetaEvalResumesFromItsRecordsAndShardsMergeToOneRun) {
     text.assign(std::istreambuf_iterator<char>(f), {});
   }
   ASSERT_EQ(std::count(text.begin(), text.end(), '\n'), 5) << text;  // the header and 4 trials
+  // As if another build had run them: each trial names its build.
+  int renamed = 0;
+  for (size_t at = text.find("\"build\":\""); at != std::string::npos;
+       at = text.find("\"build\":\"", at + 1)) {
+    const size_t v = at + 9, end = text.find('"', v);
+    text.replace(v, end - v, "perch other");
+    ++renamed;
+  }
+  ASSERT_EQ(renamed, 4) << text;
   { std::ofstream(rec, std::ios::binary) << text.substr(0, text.size() - 30); }
   r = Perch(base + "--trials 6 --records " + rec);
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_TRUE(Has(r.out, "cut short")) << r.out;
   EXPECT_TRUE(Has(r.out, "3 of 6 trials already run")) << r.out;
+  EXPECT_TRUE(Has(r.out, "3 of its trials were run by another build")) << r.out;
   const Json resumed = Json::parse(r.out.substr(r.out.find("{\"")));
   EXPECT_EQ(resumed["resumed_trials"], 3);
+  EXPECT_EQ(resumed["builds"]["perch other"], 3);
+  EXPECT_EQ(one["builds"].size(), 1u);
+  EXPECT_EQ(resumed["builds"][one["builds"].begin().key()], 3);
   same(resumed);
   // Other trials (another seed, another zone) are refused, naming the field; the file is kept.
   const auto size = std::filesystem::file_size(rec);

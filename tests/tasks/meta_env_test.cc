@@ -13,6 +13,7 @@
 #include "learner/ppo.h"
 #include "tasks/meta_eval.h"
 #include "tasks/model_source.h"
+#include "tasks/recording.h"
 #include "viz/canvas.h"
 
 namespace perch {
@@ -527,6 +528,21 @@ TEST(MetaEval, ShardsAndResumedRecordsGiveTheResultOfOneRun) {
   ASSERT_EQ(records.size(), 6u);
   const Json header = MetaEvalHeader(c, meta, frozen, o);
   ExpectSameResult(AggregateMeta(header, records), one);
+  // Each trial names the build that ran it; a record from before (no "build") counts apart, and
+  // the figures do not depend on it.
+  EXPECT_EQ(records[0].build, PerchVersion());
+  EXPECT_EQ(one["builds"], Json({{PerchVersion(), 6}}));
+  {
+    std::vector<MetaTrialRecord> mixed = records;
+    Json old = records[0].ToJson();
+    ASSERT_EQ(old.erase("build"), 1u);
+    mixed[0] = MetaTrialRecord::FromJson(old, "old line");
+    EXPECT_EQ(mixed[0].build, "");
+    const Json m = AggregateMeta(header, mixed);
+    EXPECT_EQ(m["builds"], Json({{"(not recorded)", 1}, {PerchVersion(), 5}}));
+    EXPECT_EQ(m["success_rate"], one["success_rate"]);
+    EXPECT_EQ(m["min_dist_mean_m"], one["min_dist_mean_m"]);
+  }
   // Resumed with two trials already run: only the other four run, and the result is the same.
   o.first_trial = 0;
   o.trials = 6;
