@@ -1,5 +1,5 @@
 // Small file helpers shared by every file format of the project (checkpoints, state banks, run
-// summaries): the CRC-32 of zlib/PNG/ZIP and an atomic write.
+// summaries): reading a whole file, the CRC-32 of zlib/PNG/ZIP and an atomic write.
 #pragma once
 
 #include <cstddef>
@@ -10,6 +10,11 @@ namespace perch {
 
 // CRC-32 (IEEE 802.3, as zlib's crc32).
 uint32_t Crc32(const void* data, size_t size);
+
+// The whole of `path`'s bytes. ConfigError "PATH: cannot open NOUN: <reason>" when it cannot be
+// opened, "PATH: cannot read NOUN: <reason>" when reading fails (a directory, an I/O error), so a
+// failed read is never taken for a shorter file.
+std::string ReadFileBytes(const std::string& path, const std::string& noun = "file");
 
 // Writes `bytes` to `path` atomically (temporary file, fsync, rename, fsync of the directory).
 // Throws std::runtime_error naming the path on failure; an existing file at `path` is left

@@ -4,17 +4,14 @@
 #include <unistd.h>
 
 #include <cstdio>
-#include <fstream>
 #include <set>
-#include <sstream>
+
+#include "common/file_util.h"
 
 namespace perch {
 
 Json LoadJsonFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw ConfigError(path + ": cannot open file");
-  std::stringstream ss;
-  ss << in.rdbuf();
+  const std::string text = ReadFileBytes(path);
   // Keys seen so far in each object being parsed, innermost last.
   std::vector<std::set<std::string>> keys;
   const Json::parser_callback_t no_duplicates = [&](int, Json::parse_event_t ev, Json& parsed) {
@@ -29,7 +26,7 @@ Json LoadJsonFile(const std::string& path) {
     return true;
   };
   try {
-    return Json::parse(ss.str(), no_duplicates);
+    return Json::parse(text, no_duplicates);
   } catch (const nlohmann::json::parse_error& e) {
     throw ConfigError(path + ": malformed JSON: " + e.what());
   }

@@ -1,9 +1,9 @@
 #include "common/npz.h"
 
 #include <cstring>
-#include <fstream>
 #include <sstream>
 
+#include "common/file_util.h"
 #include "common/json_util.h"
 
 namespace perch {
@@ -159,11 +159,7 @@ NpyArray ParseNpy(const std::string& b, const std::string& ctx) {
 }
 
 std::map<std::string, NpyArray> LoadNpz(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ConfigError(path + ": cannot open file");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const std::string buf = ss.str();
+  const std::string buf = ReadFileBytes(path);
   Reader r(buf, path);
   // End-of-central-directory record: 22 bytes plus an optional comment at the end of the file.
   if (buf.size() < 22) throw ConfigError(path + ": not a ZIP archive (too short)");

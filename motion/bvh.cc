@@ -7,6 +7,7 @@
 #include <functional>
 #include <sstream>
 
+#include "common/file_util.h"
 #include "common/json_util.h"
 
 namespace perch {
@@ -233,11 +234,7 @@ BvhClip ParseBvh(const std::string& text, const std::string& source) {
 }
 
 BvhClip ReadBvhFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw ConfigError(path + ": cannot open file");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ParseBvh(ss.str(), path);
+  return ParseBvh(ReadFileBytes(path), path);
 }
 
 std::string WriteBvh(const BvhClip& clip) {

@@ -11,13 +11,12 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <mutex>
 #include <set>
-#include <sstream>
 #include <thread>
 
+#include "common/file_util.h"
 #include "learner/policy.h"
 #include "tasks/meta_env.h"
 #include "tasks/meta_expert.h"
@@ -419,11 +418,7 @@ std::string MetaRecordsHeaderLine(const Json& header) {
 }
 
 MetaRecordsFile ReadMetaRecords(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw ConfigError(path + ": cannot open the records file");
-  std::ostringstream ss;
-  ss << f.rdbuf();
-  return ParseMetaRecords(ss.str(), path);
+  return ParseMetaRecords(ReadFileBytes(path, "the records file"), path);
 }
 
 MetaRecordsFile ParseMetaRecords(const std::string& text, const std::string& path) {

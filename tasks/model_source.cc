@@ -2,9 +2,8 @@
 
 #include <cstring>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 
+#include "common/file_util.h"
 #include "common/proto/wire.pb.h"
 #include "tasks/state_bank.h"
 
@@ -39,11 +38,7 @@ bool Plausible(const proto::ModelWeights& w) {
 }
 
 std::string ReadAll(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ConfigError(path + ": cannot open model file");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  std::string bytes = ss.str();
+  std::string bytes = ReadFileBytes(path, "model file");
   if (bytes.empty()) throw ConfigError(path + ": empty model file");
   return bytes;
 }

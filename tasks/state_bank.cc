@@ -7,10 +7,8 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <mutex>
-#include <sstream>
 #include <thread>
 
 #include "common/file_util.h"
@@ -41,17 +39,9 @@ Eigen::Quaterniond Q(const proto::Quat& p) {
   return Eigen::Quaterniond(p.w(), p.x(), p.y(), p.z());
 }
 
-std::string ReadAll(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw ConfigError(path + ": cannot open file");
-  std::ostringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-
 }  // namespace
 
-std::string FileSha256(const std::string& path) { return Sha256Hex(ReadAll(path)); }
+std::string FileSha256(const std::string& path) { return Sha256Hex(ReadFileBytes(path)); }
 
 std::string Sha256Hex(const std::string& bytes) {
   unsigned char md[EVP_MAX_MD_SIZE];
@@ -77,7 +67,7 @@ void WriteStateBank(const std::string& path, const proto::StateBank& bank, bool 
 }
 
 proto::StateBank ReadStateBank(const std::string& path, const HumanoidModel* model) {
-  const std::string payload = UnframePayload(ReadAll(path), path, kMagic, kStateBankFormat,
+  const std::string payload = UnframePayload(ReadFileBytes(path), path, kMagic, kStateBankFormat,
                                              "state bank", " (resample it with this build)");
   proto::StateBank bank;
   if (!bank.ParseFromString(payload))
