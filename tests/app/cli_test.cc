@@ -314,6 +314,10 @@ TEST_F(CliTest, MetaEvalResumesFromItsRecordsAndShardsMergeToOneRun) {
   EXPECT_TRUE(Has(r.out, "cut short")) << r.out;
   EXPECT_TRUE(Has(r.out, "3 of 6 trials already run")) << r.out;
   EXPECT_TRUE(Has(r.out, "3 of its trials were run by another build")) << r.out;
+  // Progress: the time a trial takes in this run (not counting the resumed ones), and what is
+  // left.
+  EXPECT_TRUE(Has(r.out, "4/6 trials")) << r.out;
+  EXPECT_TRUE(Has(r.out, " s a trial, about ")) << r.out;
   const Json resumed = Json::parse(r.out.substr(r.out.find("{\"")));
   EXPECT_EQ(resumed["resumed_trials"], 3);
   EXPECT_EQ(resumed["builds"]["perch other"], 3);
