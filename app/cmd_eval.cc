@@ -9,6 +9,7 @@
 #include <iostream>
 #include <map>
 #include <memory>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -46,6 +47,45 @@ struct ConfigOverrides {
   double target_turn_prob = -1.0;
   double start_noise = 0.02;  // turn / sit: start_joint_noise_rad for evaluation [rad]
 };
+
+// `perch eval --lookahead FILE`: a meta policy's lookahead from a JSON object of the
+// --lookahead-* flags' fields (as in sit_chair.meta.planner), instead of the flags (`flags`, which
+// must then be at their defaults). ConfigError naming the file and the key otherwise.
+PlannerConfig LookaheadFromFile(const std::string& path, const PlannerConfig& flags) {
+  const PlannerConfig none;
+  if (flags.lookahead() || flags.lookahead_rank != none.lookahead_rank ||
+      !flags.lookahead_detour_deg.empty()) {
+    throw ConfigError("--lookahead " + path +
+                      ": not with --lookahead-delays-s / --lookahead-sides / "
+                      "--lookahead-straight-s / --lookahead-detour-deg / --lookahead-rank (the "
+                      "file holds them)");
+  }
+  const Json j = LoadJsonFile(path);
+  if (!j.is_object()) throw ConfigError(path + ": not a JSON object");
+  static const std::set<std::string> kKeys = {"lookahead_delays_s", "lookahead_sides",
+                                              "lookahead_straight_s", "lookahead_detour_deg",
+                                              "lookahead_rank"};
+  for (const auto& [k, v] : j.items()) {
+    if (kKeys.count(k) == 0) {
+      throw ConfigError(path + ": \"" + k +
+                        "\" is not a lookahead field (lookahead_delays_s, lookahead_sides, "
+                        "lookahead_straight_s, lookahead_detour_deg, lookahead_rank)");
+    }
+  }
+  // The planner config's own checks (types, ranges, at most 8 times, a detour needs its times).
+  const PlannerConfig file = PlannerConfig::FromJson(j, path);
+  if (!file.lookahead()) {
+    throw ConfigError(path + ": no lookahead (lookahead_delays_s, lookahead_sides or "
+                      "lookahead_straight_s)");
+  }
+  PlannerConfig la;
+  la.lookahead_delays_s = file.lookahead_delays_s;
+  la.lookahead_sides = file.lookahead_sides;
+  la.lookahead_straight_s = file.lookahead_straight_s;
+  la.lookahead_detour_deg = file.lookahead_detour_deg;
+  la.lookahead_rank = file.lookahead_rank;
+  return la;
+}
 
 // Task config: --config's, else the model's saved one, else the task's defaults; then the
 // command-line overrides. Warns when --config's task section differs from the saved one.
@@ -188,6 +228,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     std::vector<double> lookahead_straight_s;  // ... with straight-on starts [s]
     std::vector<double> lookahead_detour_deg;  // ... and detours [deg]
     std::string lookahead_rank = "sooner";     // ... and how it ranks two successes
+    std::string lookahead_file;  // ... or all of them from a JSON file (configs/lookahead_*.json)
     std::string start_bank = "data/banks/walk_end_poses_eval.bin";  // sit_chair: walk starts
     std::string records;  // sit_chair: per-trial records, appended as trials finish (resumes)
     int first_trial = 0;  // sit_chair: a shard's first trial
@@ -312,6 +353,12 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "distance); the planner's is its config's lookahead_rank")
       ->check(CLI::IsMember({"sooner", "nearer"}))
       ->capture_default_str();
+  cmd->add_option("--lookahead", o->lookahead_file,
+                  "sit_chair with a meta policy: its lookahead from this JSON file, whose keys "
+                  "are those of the --lookahead-* flags as in sit_chair.meta.planner "
+                  "(lookahead_delays_s, lookahead_sides, lookahead_straight_s, "
+                  "lookahead_detour_deg, lookahead_rank), e.g. configs/lookahead/8x3.json; "
+                  "instead of the flags");
   cmd->add_option("--start-bank", o->start_bank,
                   "sit_chair: the walk start states (default: the evaluation bank; name the "
                   "training bank when sampling hand-overs to train on)")
@@ -501,15 +548,18 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         la.lookahead_straight_s = o->lookahead_straight_s;
         la.lookahead_rank = o->lookahead_rank;
         la.lookahead_detour_deg = o->lookahead_detour_deg;
+        if (!o->lookahead_file.empty()) {
+          la = LookaheadFromFile(o->lookahead_file, la);
+        }
         const bool look = la.lookahead();
         if (o->planner &&
-            (look || o->lookahead_rank != "sooner" || !o->lookahead_detour_deg.empty())) {
+            (look || la.lookahead_rank != "sooner" || !la.lookahead_detour_deg.empty())) {
           throw ConfigError(
-              "--lookahead-delays-s / --lookahead-sides / --lookahead-straight-s / "
+              "--lookahead / --lookahead-delays-s / --lookahead-sides / --lookahead-straight-s / "
               "--lookahead-detour-deg / --lookahead-rank: for a meta policy; the planner's "
               "lookahead is its config's sit_chair.meta.planner.lookahead_*");
         }
-        if (o->lookahead_rank != "sooner" && !look) {
+        if (la.lookahead_rank != "sooner" && !look) {
           throw ConfigError(
               "--lookahead-rank: only with a lookahead (--lookahead-delays-s, --lookahead-sides "
               "or --lookahead-straight-s)");

@@ -13,6 +13,7 @@
 #include "common/config_file.h"
 #include "common/json_util.h"
 #include "common/paths.h"
+#include "tasks/chain_plan.h"
 #include "tasks/task_env.h"
 
 namespace perch {
@@ -29,10 +30,18 @@ TEST(CommittedConfigs, EveryConfigLoadsAndItsInitFromExists) {
   std::sort(files.begin(), files.end());
   ASSERT_GE(files.size(), 30u);
   int experiments = 0, task_configs = 0;
+  int lookaheads = 0;
   for (const fs::path& f : files) {
     SCOPED_TRACE(f.string());
     const Json j = LoadComposedConfig(f.string());
-    if (j.contains("cluster")) {
+    if (f.parent_path().filename() == "lookahead") {
+      // perch eval --lookahead: a meta policy's lookahead, not a task or experiment config.
+      ++lookaheads;
+      PlannerConfig la;
+      ASSERT_NO_THROW(la = PlannerConfig::FromJson(j, f.string()));
+      EXPECT_TRUE(la.lookahead());
+      for (const auto& [k, v] : j.items()) EXPECT_EQ(k.rfind("lookahead_", 0), 0u) << k;
+    } else if (j.contains("cluster")) {
       ++experiments;
       ExperimentConfig cfg;
       ASSERT_NO_THROW(cfg = LoadExperimentConfig(f.string()));
@@ -47,6 +56,7 @@ TEST(CommittedConfigs, EveryConfigLoadsAndItsInitFromExists) {
   }
   EXPECT_GT(experiments, 0);
   EXPECT_GT(task_configs, 0);
+  EXPECT_GE(lookaheads, 2);
 }
 
 std::string ExperimentError(const Json& j) {

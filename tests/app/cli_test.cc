@@ -253,12 +253,18 @@ TEST_F(CliTest, MetaEvalLooksAheadForAMetaPolicyOnlyWhenAsked) {
   // A detour needs to know for how long.
   expect_refused(policy + "--lookahead-delays-s 0.5 --lookahead-detour-deg 60",
                  "lookahead_detour_deg: needs lookahead_straight_s");
-  Result r =
-      Perch("eval --task sit_chair --model " + src +
-                "/models/sit_chair/policy.bin --zone 1 --trials 2 --seed 7 --threads 2 --json "
-                "--lookahead-delays-s 0.5 --lookahead-sides --lookahead-straight-s 0.3 "
-                "--lookahead-rank nearer",
-            false);
+  const std::string dir = ::testing::TempDir() + "perch_eval_lookahead/";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string records = dir + "flags.jsonl";
+  const std::string run = "eval --task sit_chair --model " + src +
+                          "/models/sit_chair/policy.bin --zone 1 --trials 2 --seed 7 --threads 2 "
+                          "--json --records " +
+                          records + " ";
+  Result r = Perch(run +
+                       "--lookahead-delays-s 0.5 --lookahead-sides --lookahead-straight-s 0.3 "
+                       "--lookahead-rank nearer",
+                   false);
   ASSERT_EQ(r.code, 0) << r.out;
   const Json j = Json::parse(r.out);
   EXPECT_EQ(j["lookahead_delays_s"], Json({0.5}));
@@ -268,6 +274,37 @@ TEST_F(CliTest, MetaEvalLooksAheadForAMetaPolicyOnlyWhenAsked) {
   EXPECT_EQ(j["lookahead"]["trials_as_predicted"].get<int>(),
             j["lookahead"]["trials_predicted"].get<int>());
   EXPECT_GE(j["lookahead"]["rollouts_per_trial"].get<double>(), 2.0);
+  // The same lookahead from a file (--lookahead) is the same evaluation: it resumes the flags'
+  // records (same header) and gives their result without running a trial.
+  auto write = [&](const std::string& name, const std::string& text) {
+    std::ofstream(dir + name) << text;
+    return dir + name;
+  };
+  const std::string file = write("la.json",
+                                 R"({"lookahead_delays_s": [0.5], "lookahead_sides": true,
+                                     "lookahead_straight_s": [0.3], "lookahead_rank": "nearer"})");
+  r = Perch(run + "--lookahead " + file);
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_TRUE(Has(r.out, "2 of 2 trials already run")) << r.out;
+  const Json from_file = Json::parse(r.out.substr(r.out.find("{\"")));
+  for (const char* k : {"success_rate", "min_dist_mean_m", "transitions", "lookahead",
+                        "lookahead_delays_s", "lookahead_sides", "lookahead_straight_s",
+                        "lookahead_rank", "lookahead_detour_deg"}) {
+    EXPECT_EQ(from_file[k], j[k]) << k;
+  }
+  // Not with the flags; only lookahead fields; some lookahead; the file must exist.
+  expect_refused(policy + "--lookahead " + file + " --lookahead-sides",
+                 "not with --lookahead-delays-s");
+  expect_refused(policy + "--lookahead " + write("bad.json", R"({"lookahead_m": 2})"),
+                 "\"lookahead_m\" is not a lookahead field");
+  expect_refused(policy + "--lookahead " + write("none.json", R"({"lookahead_rank": "nearer"})"),
+                 "none.json: no lookahead");
+  expect_refused(policy + "--lookahead " + dir + "missing.json", "missing.json: cannot open");
+  // The shipped files are lookaheads (configs/lookahead/; 8x3 is stop 41's).
+  expect_refused("eval --task sit_chair --planner --config " + src +
+                     "/configs/meta_zone1_plan5_30hz.json --trials 2 --lookahead " + src +
+                     "/configs/lookahead/8x3.json",
+                 "for a meta policy; the planner's lookahead is its config's");
 }
 
 // A long evaluation in pieces: --records resumes a killed run (its torn last line dropped) and
