@@ -228,7 +228,8 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     std::vector<double> lookahead_straight_s;  // ... with straight-on starts [s]
     std::vector<double> lookahead_detour_deg;  // ... and detours [deg]
     std::string lookahead_rank = "sooner";     // ... and how it ranks two successes
-    std::string lookahead_file;  // ... or all of them from a JSON file (configs/lookahead_*.json)
+    std::string lookahead_file;  // ... or all of them from a JSON file (configs/lookahead/)
+    bool record_routes = false;  // ... and each start route's outcome in the records
     std::string start_bank = "data/banks/walk_end_poses_eval.bin";  // sit_chair: walk starts
     std::string records;  // sit_chair: per-trial records, appended as trials finish (resumes)
     int first_trial = 0;  // sit_chair: a shard's first trial
@@ -359,6 +360,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "(lookahead_delays_s, lookahead_sides, lookahead_straight_s, "
                   "lookahead_detour_deg, lookahead_rank), e.g. configs/lookahead/8x3.json; "
                   "instead of the flags");
+  cmd->add_flag("--record-routes", o->record_routes,
+                "sit_chair with --records and a lookahead with straight-on starts: each record "
+                "also holds the start observation and the outcome of every start route tried "
+                "(data for learning the start route)");
   cmd->add_option("--start-bank", o->start_bank,
                   "sit_chair: the walk start states (default: the evaluation bank; name the "
                   "training bank when sampling hand-overs to train on)")
@@ -585,6 +590,12 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
         mo.threads = o->threads;
         mo.first_trial = o->first_trial;
         mo.policy_lookahead = la;
+        if (o->record_routes && (o->records.empty() || la.lookahead_straight_s.empty())) {
+          throw ConfigError(
+              "--record-routes: needs --records and a lookahead with straight-on starts "
+              "(--lookahead-straight-s or lookahead_straight_s in --lookahead)");
+        }
+        mo.record_routes = o->record_routes;
         const proto::ModelWeights meta_weights =
             o->planner ? proto::ModelWeights() : LoadModelFile(model_file);
         std::vector<proto::BankState> sit_starts, failed_sit_starts;

@@ -78,6 +78,8 @@ TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int tri
     };
   }
   env.Reset(obs.data());
+  std::vector<float> start_obs;
+  if (o.record_routes) start_obs = obs;
   if (d.planner != nullptr) d.planner->Reset();
   if (d.lookahead != nullptr) d.lookahead->Reset(2 * s);
   for (int t = 0; t < env.spec().max_episode_steps; ++t) {
@@ -122,6 +124,13 @@ TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int tri
     rec.la_as_predicted = st.predicted_any && p.success == rec.success &&
                           (p.success ? p.success_step == e.success_step : p.fell == e.fell);
     rec.la_not_worse = st.predicted_any && !d.lookahead->Better(st.rules, LookaheadOutcome::Of(e));
+    if (o.record_routes) {
+      rec.start_obs = std::move(start_obs);
+      for (const LookaheadPlanner::Stats::Route& r : st.routes) {
+        rec.routes.push_back({r.straight_steps, r.detour_deg, r.outcome.success, r.outcome.fell,
+                              r.outcome.success_step, r.outcome.min_dist_m});
+      }
+    }
   }
   return out;
 }
@@ -210,6 +219,19 @@ Json MetaTrialRecord::ToJson() const {
          {"sequence", sequence},
          {"begin_value", begin_value}};
   if (!build.empty()) j["build"] = build;
+  if (!start_obs.empty()) j["start_obs"] = start_obs;
+  if (!routes.empty()) {
+    Json rs = Json::array();
+    for (const Route& r : routes) {
+      rs.push_back({{"straight_steps", r.straight_steps},
+                    {"detour_deg", std::isnan(r.detour_deg) ? Json() : Json(r.detour_deg)},
+                    {"success", r.success},
+                    {"fell", r.fell},
+                    {"success_step", r.success_step},
+                    {"min_dist_m", r.min_dist_m}});
+    }
+    j["routes"] = rs;
+  }
   if (has_lookahead) {
     j["lookahead"] = {{"points", la_points},
                       {"rollouts", la_rollouts},
@@ -238,6 +260,25 @@ MetaTrialRecord MetaTrialRecord::FromJson(const Json& j, const std::string& wher
   GetRequired(j, "sequence", r.sequence, where);
   GetRequired(j, "begin_value", r.begin_value, where);
   GetOptional(j, "build", r.build, where);
+  GetOptional(j, "start_obs", r.start_obs, where);
+  if (j.contains("routes")) {
+    const Json& rs = j.at("routes");
+    if (!rs.is_array()) throw ConfigError(where + ".routes: not an array");
+    for (size_t i = 0; i < rs.size(); ++i) {
+      const std::string w = where + ".routes[" + std::to_string(i) + "]";
+      if (!rs[i].is_object()) throw ConfigError(w + ": not a JSON object");
+      Route route;
+      GetRequired(rs[i], "straight_steps", route.straight_steps, w);
+      const Json& d = rs[i].contains("detour_deg") ? rs[i].at("detour_deg") : Json();
+      if (!d.is_null() && !d.is_number()) throw ConfigError(w + ".detour_deg: not a number");
+      route.detour_deg = d.is_null() ? std::nan("") : d.get<double>();
+      GetRequired(rs[i], "success", route.success, w);
+      GetRequired(rs[i], "fell", route.fell, w);
+      GetRequired(rs[i], "success_step", route.success_step, w);
+      GetRequired(rs[i], "min_dist_m", route.min_dist_m, w);
+      r.routes.push_back(route);
+    }
+  }
   for (int id : r.sequence) {
     if (id < 0 || id >= kNumSubtasks) {
       throw ConfigError(where + ": \"sequence\" holds " + std::to_string(id) + ", not a subtask");

@@ -49,6 +49,18 @@ struct MetaTrialRecord {
   // none (""). A resumed evaluation can span builds; the header cannot see a code change, so
   // each trial says which build ran it and AggregateMeta counts them ("builds").
   std::string build;
+  // With MetaEvalOptions::record_routes: the meta observation at the start [obs_dim] and the
+  // outcome of each start route the lookahead tried (LookaheadPlanner::Stats::routes), for
+  // learning the start route (docs/meta.md "Stop 42"). Empty otherwise.
+  struct Route {
+    int straight_steps = 0;  // [meta steps]; 0: the policy's own start
+    double detour_deg = 0;   // [deg] off the facing; NaN: straight ahead
+    bool success = false, fell = false;
+    int success_step = -1;
+    double min_dist_m = 0;
+  };
+  std::vector<float> start_obs;
+  std::vector<Route> routes;
 
   Json ToJson() const;
   // ConfigError naming `where` and the field when a field is missing or of the wrong type.
@@ -82,6 +94,9 @@ struct MetaEvalOptions {
   // a turn, straight-on walking at the start, the rank). None set: the policy alone. (The
   // planner's lookahead is its config's.)
   PlannerConfig policy_lookahead;
+  // Each record also holds the start observation and every start route's outcome
+  // (MetaTrialRecord::routes; needs a lookahead with straight-on starts).
+  bool record_routes = false;
   // Trials already run (from a records file): not run again, but in the result. Each must lie in
   // this evaluation's trials, once.
   std::vector<MetaTrialRecord> done;

@@ -196,8 +196,8 @@ void LookaheadPlanner::Act(MetaEnv& env, float* action) {
   // Straight-on starts: [meta steps, world direction (NaN: ahead)].
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::vector<std::pair<int, double>> straights{{0, nan}};
+  const double facing = env.humanoid().RootRpy().z();
   if (first) {
-    const double facing = env.humanoid().RootRpy().z();
     for (int st : straights_) {
       straights.emplace_back(st, nan);
       for (double d : detours_) straights.emplace_back(st, facing + d);
@@ -214,6 +214,10 @@ void LookaheadPlanner::Act(MetaEnv& env, float* action) {
       for (int h : holds) {
         const LookaheadOutcome o = Rollout(s, before, side, h, st, yaw);
         if (!stats_.predicted_any && !have) stats_.rules = o;
+        if (first && before.is_policy() && side == sides[0] && h == 0) {
+          stats_.routes.push_back(
+              {st, std::isnan(yaw) ? nan : AngleDiff(yaw, facing) * 180.0 / M_PI, o});
+        }
         if (!have || Better(o, best)) {
           best = o;
           best_side = side;

@@ -84,6 +84,15 @@ class LookaheadPlanner {
     // What the rules alone (with the same saves and restores) did from the first look ahead on:
     // the outcome the lookahead must not fall below.
     LookaheadOutcome rules;
+    // A meta policy's start routes (its first step, with straight-on starts): each one's outcome,
+    // in the order tried (the policy's own first, straight_steps 0). For learning which start
+    // to take without the simulator (docs/meta.md "Stop 42").
+    struct Route {
+      int straight_steps = 0;  // [meta steps] walked straight on before the policy steers
+      double detour_deg = 0;   // off the facing at the start [deg] (NaN: straight ahead)
+      LookaheadOutcome outcome;
+    };
+    std::vector<Route> routes;
   };
   const Stats& stats() const { return stats_; }
   // Whether `a` ranks above `b` as this lookahead ranks outcomes.

@@ -292,6 +292,11 @@ TEST_F(CliTest, MetaEvalLooksAheadForAMetaPolicyOnlyWhenAsked) {
                         "lookahead_rank", "lookahead_detour_deg"}) {
     EXPECT_EQ(from_file[k], j[k]) << k;
   }
+  // Start routes are recorded only into records, and only with straight-on starts to record.
+  expect_refused(policy + "--lookahead-straight-s 0.3 --record-routes",
+                 "--record-routes: needs --records");
+  expect_refused(policy + "--lookahead-delays-s 0.3 --record-routes --records " + dir + "x.jsonl",
+                 "--record-routes: needs --records and a lookahead with straight-on starts");
   // Not with the flags; only lookahead fields; some lookahead; the file must exist.
   expect_refused(policy + "--lookahead " + file + " --lookahead-sides",
                  "not with --lookahead-delays-s");

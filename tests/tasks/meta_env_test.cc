@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <set>
 
 #include "common/paths.h"
@@ -711,6 +712,65 @@ TEST(MetaEval, TheMetaPolicyWithLookaheadIsExactAndNoWorseThanAlone) {
   EXPECT_EQ(near["lookahead"]["trials_as_predicted"].get<int>(), 4);
   EXPECT_EQ(near["lookahead"]["trials_not_worse_than_rules"].get<int>(), 4);
   EXPECT_GE(near["success_rate"].get<double>(), alone["success_rate"].get<double>());
+}
+
+// --record-routes: each trial's record holds its start observation and the outcome of every
+// start route tried (the policy's own first), and the trial takes the best of them (only start
+// routes here, ranked by the sooner success), so its outcome is theirs.
+TEST(MetaEval, StartRoutesAreRecordedAndTheTrialTakesTheBest) {
+  const std::string model = ResolveProjectPath("models/sit_chair/policy.bin");
+  TaskEnvConfig c = TaskEnvConfig::FromJson(SavedConfig(model)["env"], "saved");
+  c.env.spawn = SpawnConfig();
+  c.env.spawn.zone = 1;
+  const std::vector<FrozenPolicyData> frozen = FrozenPoliciesIn(model);
+  const proto::ModelWeights meta = LoadModelFile(model);
+  MetaEvalOptions o;
+  o.trials = 3;
+  o.seed = 7;
+  o.threads = 2;
+  o.policy_lookahead.lookahead_straight_s = {0.5};
+  o.policy_lookahead.lookahead_detour_deg = {-60.0, 60.0};
+  o.record_routes = true;
+  std::vector<MetaTrialRecord> records;
+  o.on_record = [&](const MetaTrialRecord& r) {
+    records.push_back(MetaTrialRecord::FromJson(Json::parse(r.ToJson().dump()), "line"));
+  };
+  const Json j = EvaluateMeta(c, meta, frozen, o);
+  ASSERT_EQ(records.size(), 3u);
+  const MetaEnv probe(c);
+  const double dt = probe.humanoid().spec().control_dt;
+  for (const MetaTrialRecord& r : records) {
+    SCOPED_TRACE(r.trial);
+    EXPECT_EQ(static_cast<int>(r.start_obs.size()), probe.spec().obs_dim);
+    ASSERT_EQ(r.routes.size(), 4u);  // its own, then ahead, 60 deg right and left for 0.5 s
+    EXPECT_EQ(r.routes[0].straight_steps, 0);
+    EXPECT_TRUE(std::isnan(r.routes[0].detour_deg));
+    EXPECT_GT(r.routes[1].straight_steps, 0);
+    EXPECT_TRUE(std::isnan(r.routes[1].detour_deg));
+    EXPECT_NEAR(r.routes[2].detour_deg, -60.0, 1e-9);
+    EXPECT_NEAR(r.routes[3].detour_deg, 60.0, 1e-9);
+    // The policy's own route is what it would do alone (with the same restores).
+    EXPECT_EQ(r.routes[0].success, r.la_rules_success);
+    bool any = false;
+    int sooner = std::numeric_limits<int>::max();
+    for (const MetaTrialRecord::Route& route : r.routes) {
+      any = any || route.success;
+      if (route.success) sooner = std::min(sooner, route.success_step);
+      if (route.success) EXPECT_FALSE(route.fell);
+    }
+    EXPECT_EQ(r.success, any);
+    if (any) EXPECT_NEAR(r.time_to_sit_s, sooner * dt, 1e-9);
+  }
+  EXPECT_EQ(j["lookahead"]["rollouts_per_trial"].get<double>(), 4.0);
+  // Without the option the records hold no routes.
+  o.record_routes = false;
+  o.trials = 1;
+  records.clear();
+  EvaluateMeta(c, meta, frozen, o);
+  ASSERT_EQ(records.size(), 1u);
+  EXPECT_TRUE(records[0].routes.empty());
+  EXPECT_TRUE(records[0].start_obs.empty());
+  EXPECT_FALSE(records[0].ToJson().contains("routes"));
 }
 
 // A saved episode restored into a second env goes on exactly as the env that saved it does after
