@@ -1007,6 +1007,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     std::vector<std::string> files;
     std::string matrix_png;
     int trials = 0;  // only the first N trials (0: all)
+    bool so_far = false;  // only the trials up to the first one missing
     bool json = false;
   };
   auto mg = std::make_shared<MergeOpts>();
@@ -1023,6 +1024,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                  "only the first N trials (from the lowest), e.g. a figure so far from a run that "
                  "is still going (0: all; they must all be there)")
       ->check(CLI::Range(0, 100000000));
+  me->add_flag("--so-far", mg->so_far,
+               "only the trials from the lowest up to the first one missing: the figure so far "
+               "of a run still going (its threads finish trials out of order)")
+      ->excludes("--trials");
   me->add_flag("--json", mg->json, "print one JSON object on stdout");
   me->callback([mg]() {
     Json header;
@@ -1052,6 +1057,11 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
     }
     if (all.empty()) throw ConfigError("eval-merge: the records hold no trials");
     const int lo = owner.begin()->first;
+    if (mg->so_far) {
+      int n = 0;
+      while (owner.count(lo + n)) ++n;
+      mg->trials = n;
+    }
     if (mg->trials > 0) {
       all.erase(
           std::remove_if(all.begin(), all.end(),

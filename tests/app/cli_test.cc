@@ -393,12 +393,21 @@ TEST_F(CliTest, MetaEvalResumesFromItsRecordsAndShardsMergeToOneRun) {
   for (const char* k : {"trials", "success_rate", "min_dist_mean_m", "transitions"}) {
     EXPECT_EQ(Json::parse(r.out)[k], first_two[k]) << k;
   }
+  // --so-far: up to the first missing trial (here a and c hold 0, 1 and 4, 5: the first two).
+  ASSERT_EQ(Perch(base + "--trials 2 --first-trial 4 --records " + dir + "c.jsonl", false).code, 0);
+  r = Perch("eval-merge " + a + " " + dir + "c.jsonl --so-far --json", false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  for (const char* k : {"trials", "success_rate", "min_dist_mean_m", "transitions"}) {
+    EXPECT_EQ(Json::parse(r.out)[k], first_two[k]) << k;
+  }
+  r = Perch("eval-merge " + b + " " + a + " --so-far --trials 2");
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "excludes")) << r.out;
   r = Perch("eval-merge " + b + " " + a + " --trials 7");
   EXPECT_TRUE(Has(r.out, "hold 6 of trials 0 .. 6")) << r.out;
   r = Perch("eval-merge " + a + " " + rec);
   EXPECT_NE(r.code, 0);
   EXPECT_TRUE(Has(r.out, "overlapping shards")) << r.out;
-  ASSERT_EQ(Perch(base + "--trials 2 --first-trial 4 --records " + dir + "c.jsonl", false).code, 0);
   r = Perch("eval-merge " + a + " " + dir + "c.jsonl");
   EXPECT_NE(r.code, 0);
   EXPECT_TRUE(Has(r.out, "lack 2, the first 2")) << r.out;
