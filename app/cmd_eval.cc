@@ -75,7 +75,8 @@ PlannerConfig LookaheadFromFile(const std::string& path, const PlannerConfig& fl
   // The planner config's own checks (types, ranges, at most 8 times, a detour needs its times).
   const PlannerConfig file = PlannerConfig::FromJson(j, path);
   if (!file.lookahead()) {
-    throw ConfigError(path + ": no lookahead (lookahead_delays_s, lookahead_sides or "
+    throw ConfigError(path +
+                      ": no lookahead (lookahead_delays_s, lookahead_sides or "
                       "lookahead_straight_s)");
   }
   PlannerConfig la;
@@ -659,8 +660,8 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
           const int ran = done - resumed;
           if (ran > 0 && done < mo.trials) {
             std::cerr << ", " << std::setprecision(3) << sec / ran << " s a trial, about "
-                      << static_cast<int>((mo.trials - done) * sec / ran / 60 + 0.5)
-                      << " min to go" << std::setprecision(6);
+                      << static_cast<int>((mo.trials - done) * sec / ran / 60 + 0.5) << " min to go"
+                      << std::setprecision(6);
           }
           std::cerr << "\n";
         };

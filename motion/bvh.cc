@@ -233,9 +233,7 @@ BvhClip ParseBvh(const std::string& text, const std::string& source) {
   return clip;
 }
 
-BvhClip ReadBvhFile(const std::string& path) {
-  return ParseBvh(ReadFileBytes(path), path);
-}
+BvhClip ReadBvhFile(const std::string& path) { return ParseBvh(ReadFileBytes(path), path); }
 
 std::string WriteBvh(const BvhClip& clip) {
   static const char* kNames[] = {"Xposition", "Yposition", "Zposition",

@@ -287,9 +287,9 @@ TEST_F(CliTest, MetaEvalLooksAheadForAMetaPolicyOnlyWhenAsked) {
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_TRUE(Has(r.out, "2 of 2 trials already run")) << r.out;
   const Json from_file = Json::parse(r.out.substr(r.out.find("{\"")));
-  for (const char* k : {"success_rate", "min_dist_mean_m", "transitions", "lookahead",
-                        "lookahead_delays_s", "lookahead_sides", "lookahead_straight_s",
-                        "lookahead_rank", "lookahead_detour_deg"}) {
+  for (const char* k :
+       {"success_rate", "min_dist_mean_m", "transitions", "lookahead", "lookahead_delays_s",
+        "lookahead_sides", "lookahead_straight_s", "lookahead_rank", "lookahead_detour_deg"}) {
     EXPECT_EQ(from_file[k], j[k]) << k;
   }
   // Start routes are recorded only into records, and only with straight-on starts to record.
