@@ -48,13 +48,17 @@ struct ConfigOverrides {
   double start_noise = 0.02;  // turn / sit: start_joint_noise_rad for evaluation [rad]
 };
 
+// Whether any of a meta policy's lookahead fields (the --lookahead-* flags) is off its default.
+bool SetsLookahead(const PlannerConfig& c) {
+  return c.lookahead() || c.lookahead_rank != PlannerConfig().lookahead_rank ||
+         !c.lookahead_detour_deg.empty();
+}
+
 // `perch eval --lookahead FILE`: a meta policy's lookahead from a JSON object of the
 // --lookahead-* flags' fields (as in sit_chair.meta.planner), instead of the flags (`flags`, which
 // must then be at their defaults). ConfigError naming the file and the key otherwise.
 PlannerConfig LookaheadFromFile(const std::string& path, const PlannerConfig& flags) {
-  const PlannerConfig none;
-  if (flags.lookahead() || flags.lookahead_rank != none.lookahead_rank ||
-      !flags.lookahead_detour_deg.empty()) {
+  if (SetsLookahead(flags)) {
     throw ConfigError("--lookahead " + path +
                       ": not with --lookahead-delays-s / --lookahead-sides / "
                       "--lookahead-straight-s / --lookahead-detour-deg / --lookahead-rank (the "
@@ -72,20 +76,15 @@ PlannerConfig LookaheadFromFile(const std::string& path, const PlannerConfig& fl
                         "lookahead_straight_s, lookahead_detour_deg, lookahead_rank)");
     }
   }
-  // The planner config's own checks (types, ranges, at most 8 times, a detour needs its times).
-  const PlannerConfig file = PlannerConfig::FromJson(j, path);
+  // The planner config's own checks (types, ranges, at most 8 times, a detour needs its times);
+  // with only lookahead keys, every other field keeps its default, as with the flags.
+  PlannerConfig file = PlannerConfig::FromJson(j, path);
   if (!file.lookahead()) {
     throw ConfigError(path +
                       ": no lookahead (lookahead_delays_s, lookahead_sides or "
                       "lookahead_straight_s)");
   }
-  PlannerConfig la;
-  la.lookahead_delays_s = file.lookahead_delays_s;
-  la.lookahead_sides = file.lookahead_sides;
-  la.lookahead_straight_s = file.lookahead_straight_s;
-  la.lookahead_detour_deg = file.lookahead_detour_deg;
-  la.lookahead_rank = file.lookahead_rank;
-  return la;
+  return file;
 }
 
 // Task config: --config's, else the model's saved one, else the task's defaults; then the
@@ -558,8 +557,7 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
           la = LookaheadFromFile(o->lookahead_file, la);
         }
         const bool look = la.lookahead();
-        if (o->planner &&
-            (look || la.lookahead_rank != "sooner" || !la.lookahead_detour_deg.empty())) {
+        if (o->planner && SetsLookahead(la)) {
           throw ConfigError(
               "--lookahead / --lookahead-delays-s / --lookahead-sides / --lookahead-straight-s / "
               "--lookahead-detour-deg / --lookahead-rank: for a meta policy; the planner's "

@@ -655,14 +655,27 @@ TEST(MetaEval, ShardsAndResumedRecordsGiveTheResultOfOneRun) {
   EXPECT_THROW(ReadMetaRecords(path), ConfigError);
 }
 
-TEST(MetaEval, TheMetaPolicyWithLookaheadIsExactAndNoWorseThanAlone) {
+// The delivered meta policy in Zone 1: its saved env config, frozen subtasks and weights.
+struct DeliveredMeta {
+  TaskEnvConfig config;
+  std::vector<FrozenPolicyData> frozen;
+  proto::ModelWeights meta;
+};
+DeliveredMeta LoadDeliveredMeta() {
   const std::string model = ResolveProjectPath("models/sit_chair/policy.bin");
-  TaskEnvConfig c = TaskEnvConfig::FromJson(SavedConfig(model)["env"], "saved");
-  c.env.spawn = SpawnConfig();
-  c.env.spawn.zone = 1;
-  const std::vector<FrozenPolicyData> frozen = FrozenPoliciesIn(model);
+  DeliveredMeta d{TaskEnvConfig::FromJson(SavedConfig(model)["env"], "saved"),
+                  FrozenPoliciesIn(model), LoadModelFile(model)};
+  d.config.env.spawn = SpawnConfig();
+  d.config.env.spawn.zone = 1;
+  return d;
+}
+
+TEST(MetaEval, TheMetaPolicyWithLookaheadIsExactAndNoWorseThanAlone) {
+  const DeliveredMeta d = LoadDeliveredMeta();
+  const TaskEnvConfig& c = d.config;
+  const std::vector<FrozenPolicyData>& frozen = d.frozen;
   ASSERT_EQ(frozen.size(), 4u);
-  const proto::ModelWeights meta = LoadModelFile(model);
+  const proto::ModelWeights& meta = d.meta;
   MetaEvalOptions o;
   o.trials = 4;
   o.seed = 7;
@@ -718,12 +731,10 @@ TEST(MetaEval, TheMetaPolicyWithLookaheadIsExactAndNoWorseThanAlone) {
 // start route tried (the policy's own first), and the trial takes the best of them (only start
 // routes here, ranked by the sooner success), so its outcome is theirs.
 TEST(MetaEval, StartRoutesAreRecordedAndTheTrialTakesTheBest) {
-  const std::string model = ResolveProjectPath("models/sit_chair/policy.bin");
-  TaskEnvConfig c = TaskEnvConfig::FromJson(SavedConfig(model)["env"], "saved");
-  c.env.spawn = SpawnConfig();
-  c.env.spawn.zone = 1;
-  const std::vector<FrozenPolicyData> frozen = FrozenPoliciesIn(model);
-  const proto::ModelWeights meta = LoadModelFile(model);
+  const DeliveredMeta d = LoadDeliveredMeta();
+  const TaskEnvConfig& c = d.config;
+  const std::vector<FrozenPolicyData>& frozen = d.frozen;
+  const proto::ModelWeights& meta = d.meta;
   MetaEvalOptions o;
   o.trials = 3;
   o.seed = 7;
