@@ -24,8 +24,8 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
   CheckKnownKeys(
       j,
       {"_comment", "humanoid_file", "chair", "chair_placement", "physics", "action_mode",
-       "pd_implicit", "obs_layout", "obs", "spawn", "init", "safety", "seat_contact_max_pelvis_z",
-       "seat_contact_relative", "chair_random", "task", "stand"},
+       "pd_implicit", "obs_layout", "obs", "spawn", "init", "safety", "push",
+       "seat_contact_max_pelvis_z", "seat_contact_relative", "chair_random", "task", "stand"},
       ctx);
   EnvConfig c;
   GetOptional(j, "humanoid_file", c.humanoid_file, ctx);
@@ -129,6 +129,27 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
     GetOptional(s, "max_root_speed", c.safety.max_root_speed, sc);
     GetOptional(s, "max_root_ang_speed", c.safety.max_root_ang_speed, sc);
     GetOptional(s, "max_abs_position", c.safety.max_abs_position, sc);
+  }
+  if (j.contains("push")) {
+    const Json& p = j["push"];
+    const std::string pc = ctx + ".push";
+    CheckKnownKeys(p, {"rate_hz", "force_min_n", "force_max_n", "duration_s", "delay_s"}, pc);
+    GetOptional(p, "rate_hz", c.push.rate_hz, pc);
+    GetOptional(p, "force_min_n", c.push.force_min_n, pc);
+    GetOptional(p, "force_max_n", c.push.force_max_n, pc);
+    GetOptional(p, "duration_s", c.push.duration_s, pc);
+    GetOptional(p, "delay_s", c.push.delay_s, pc);
+    if (!(c.push.rate_hz >= 0.0 && c.push.rate_hz <= 100.0)) {
+      throw ConfigError(pc + ".rate_hz: must be in [0, 100] pushes per second");
+    }
+    if (!(c.push.force_min_n >= 0.0 && c.push.force_max_n >= c.push.force_min_n &&
+          c.push.force_max_n <= 1e4)) {
+      throw ConfigError(pc + ".force_min_n / force_max_n: need 0 <= min <= max <= 10000 N");
+    }
+    if (!(c.push.duration_s > 0.0 && c.push.duration_s <= 10.0)) {
+      throw ConfigError(pc + ".duration_s: must be in (0, 10] s");
+    }
+    if (!(c.push.delay_s >= 0.0)) throw ConfigError(pc + ".delay_s: must be >= 0");
   }
   GetOptional(j, "seat_contact_max_pelvis_z", c.seat_contact_max_pelvis_z, ctx);
   GetOptional(j, "seat_contact_relative", c.seat_contact_relative, ctx);
@@ -238,6 +259,12 @@ Json EnvConfig::ToJson() const {
         {"max_root_speed", safety.max_root_speed},
         {"max_root_ang_speed", safety.max_root_ang_speed},
         {"max_abs_position", safety.max_abs_position}}},
+      {"push",
+       {{"rate_hz", push.rate_hz},
+        {"force_min_n", push.force_min_n},
+        {"force_max_n", push.force_max_n},
+        {"duration_s", push.duration_s},
+        {"delay_s", push.delay_s}}},
       {"seat_contact_max_pelvis_z", seat_contact_max_pelvis_z},
       {"seat_contact_relative", seat_contact_relative},
       {"chair_random",

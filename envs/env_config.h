@@ -82,6 +82,18 @@ struct SafetyConfig {
   double max_abs_position = 1000.0;  // [m]
 };
 
+// Random pushes on the pelvis, a training perturbation (ours; the paper has none): a push starts
+// in a control step with probability rate_hz * control_dt, lasts duration_s, and has a horizontal
+// force of a uniform magnitude in [force_min_n, force_max_n] in a uniform direction. Off (rate 0)
+// by default and in every evaluation config; the env's RNG is only drawn from when on.
+struct PushConfig {
+  double rate_hz = 0.0;      // [1/s] mean pushes per second of episode
+  double force_min_n = 0.0;  // [N]
+  double force_max_n = 0.0;  // [N]
+  double duration_s = 0.2;   // [s]
+  double delay_s = 0.0;      // [s] no push starts in the episode's first delay_s
+};
+
 // The `stand` task: reward for staying upright, early termination on falling, time limit.
 struct StandTaskConfig {
   double alive_bonus = 1.0;                        // per control step while up
@@ -123,6 +135,7 @@ struct EnvConfig {
   SpawnConfig spawn;
   InitConfig init;
   SafetyConfig safety;
+  PushConfig push;
   double seat_contact_max_pelvis_z = 0.54;  // contact = pelvis touches chair AND pelvis z < this
   // The threshold follows the seat: max_pelvis_z + (seat height - the authors' 0.4029 m), so it is
   // the authors' 0.54 m on their chair and the same height above the seat on any other (ours).

@@ -289,6 +289,8 @@ void HumanoidChairEnv::ResetFromQpos(const double* qpos51, float* obs) {
 void HumanoidChairEnv::ResetToState(const HumanoidState& s, float* obs) {
   world_->SetState(s);
   step_ = 0;
+  push_steps_left_ = 0;
+  pushes_ = 0;
   foot_flags_ = {false, false};  // authors: zeros right after reset
   tau_.fill(0.0);
   AfterPhysics();
@@ -307,7 +309,8 @@ EnvState HumanoidChairEnv::GetState() const {
 }
 
 void HumanoidChairEnv::SetState(const EnvState& s) {
-  world_->SetState(s.world);
+  world_->SetState(s.world);  // ends a push: pushes are a training perturbation, not state
+  push_steps_left_ = 0;
   foot_flags_ = s.foot_flags;
   if (s.shown_flags) shown_flags_ = *s.shown_flags;
   step_ = s.step;
@@ -328,7 +331,23 @@ void HumanoidChairEnv::ComputePdTorques(const float* a) {
   pd_->Torques(a, q, qd, tau_.data());
 }
 
+void HumanoidChairEnv::UpdatePush() {
+  const PushConfig& p = config_.push;
+  if (push_steps_left_ > 0 && --push_steps_left_ == 0)
+    world_->SetRootForce(Eigen::Vector3d::Zero());
+  // The RNG is drawn from only when pushes are on, so runs without them draw as before.
+  if (p.rate_hz <= 0.0 || push_steps_left_ > 0) return;
+  const double dt = config_.physics.physics_dt * config_.physics.substeps;
+  if (step_ * dt < p.delay_s || rng_.Uniform() >= p.rate_hz * dt) return;
+  const double force = rng_.Uniform(p.force_min_n, p.force_max_n);
+  const double angle = rng_.Uniform(-M_PI, M_PI);
+  world_->SetRootForce(Eigen::Vector3d(force * std::cos(angle), force * std::sin(angle), 0.0));
+  push_steps_left_ = std::max(1, static_cast<int>(std::lround(p.duration_s / dt)));
+  ++pushes_;
+}
+
 StepResult HumanoidChairEnv::Step(const float* action, float* obs) {
+  UpdatePush();
   const int n = model_.num_joints();
   for (int i = 0; i < n; ++i) {
     const float a = action[i];

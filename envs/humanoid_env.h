@@ -122,6 +122,9 @@ class HumanoidChairEnv : public Env {
   void SetWalkTarget(const Eigen::Vector2d& world_xy) { walk_target_ = world_xy; }
   Eigen::Vector2d walk_target() const { return walk_target_; }
   int episode_step() const { return step_; }
+  // The random push (env.push) on the pelvis now [N], world frame; zero between pushes.
+  const Eigen::Vector3d& push_force() const { return world_->root_force(); }
+  int pushes() const { return pushes_; }  // pushes started this episode
   // Torques [N m] (observation order) last applied, for diagnostics.
   const std::array<double, HumanoidModel::kNumJoints>& last_torques() const { return tau_; }
   const PdController& pd() const { return *pd_; }
@@ -136,6 +139,7 @@ class HumanoidChairEnv : public Env {
   void WriteObs(float* obs);
   bool StateInvalid() const;
   void ComputePdTorques(const float* clipped_action);
+  void UpdatePush();  // env.push: ends, starts or keeps the pelvis push before a control step
 
   EnvConfig config_;
   HumanoidModel model_;
@@ -155,6 +159,8 @@ class HumanoidChairEnv : public Env {
   std::array<bool, 2> foot_flags_{};
   std::array<bool, 2> shown_flags_{};  // the flags in the last observation written
   int step_ = 0;
+  int push_steps_left_ = 0;  // control steps the current push still lasts
+  int pushes_ = 0;
   Eigen::Vector2d walk_target_ = Eigen::Vector2d::Zero();
   std::array<double, HumanoidModel::kNumJoints> tau_{};
   std::array<float, HumanoidModel::kNumJoints> action_clipped_{};

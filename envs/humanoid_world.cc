@@ -304,6 +304,7 @@ World::~World() = default;
 
 void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
   scene_.reset();  // destroy the old world before building the new one
+  root_force_.setZero();
   scene_ = std::make_unique<Scene>(config_.collision_pool_size);
   Scene& sc = *scene_;
   sc.world.setGravity(btVector3(0, 0, -config_.gravity));
@@ -555,6 +556,9 @@ void World::StepPhysics() {
   Scene& sc = *scene_;
   UpdateJointLimits();
   AddJointTorques(tau_.data());
+  if (!root_force_.isZero()) {
+    sc.body->addBaseForce(btVector3(root_force_.x(), root_force_.y(), root_force_.z()));
+  }
   // maxSubSteps = 0: exactly one step of physics_dt (Bullet clears the torques afterwards).
   sc.world.stepSimulation(config_.physics_dt, 0, config_.physics_dt);
 }

@@ -140,6 +140,10 @@ class World {
 
   // Torques [N m] per joint in observation order, applied at every following physics step.
   void SetJointTorques(const double* tau);
+  // A force [N] on the root body (pelvis) at its centre of mass, world frame, applied at every
+  // following physics step until changed (zero: none). A SetState clears it.
+  void SetRootForce(const Eigen::Vector3d& force) { root_force_ = force; }
+  const Eigen::Vector3d& root_force() const { return root_force_; }
   void StepPhysics();
 
   void ReadJoints(double* q, double* qd) const;  // [num_joints] each, observation order
@@ -185,6 +189,7 @@ class World {
   PhysicsConfig config_;
   std::unique_ptr<Scene> scene_;
   std::array<double, HumanoidModel::kNumJoints> tau_{};
+  Eigen::Vector3d root_force_ = Eigen::Vector3d::Zero();
   std::vector<double> damping_;  // [num_joints] passive damping c_j [N m s/rad]
   Eigen::MatrixXd damp_push_;   // [nj x nj] h Minv [s/(kg m^2)]; empty: no damping
   Eigen::MatrixXd damp_solve_;  // [nj x nj] (1 + h Minv C)^-1

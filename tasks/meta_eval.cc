@@ -490,6 +490,15 @@ MetaRecordsFile ParseMetaRecords(const std::string& text, const std::string& pat
     throw ConfigError(path + ":1: the header line has no end (a records file is one per line)");
   }
   out.header = head["header"];
+  // The env config as this build reads it: a field added since the file was made takes its
+  // default, so the file resumes and merges while that field stays at its default.
+  if (out.header.contains("env") && out.header["env"].is_object()) {
+    try {
+      out.header["env"] = TaskEnvConfig::FromJson(out.header["env"], "header.env").ToJson();
+    } catch (const ConfigError&) {
+      // Not a config this build reads (a field since removed): compared as written, and refused.
+    }
+  }
   out.complete_bytes = ends[0];
   std::set<int> seen;
   for (size_t i = 1; i < lines.size(); ++i) {

@@ -162,7 +162,9 @@ class MetaRecordsWriter {
   std::string path_;
 };
 // The first key whose value differs between two headers ("" when equal), for the refusal; "about"
-// (the model's and bank's paths, which differ between machines) is not compared.
+// (the model's and bank's paths, which differ between machines) is not compared. A file's header
+// is read with its env config filled in with this build's defaults (ParseMetaRecords), so a
+// config field added later does not refuse older records while it keeps its default.
 std::string FirstHeaderDifference(const Json& a, const Json& b);
 
 // JSON: trials, seed, zone, success_rate, success_ci95, min_dist_mean_m, min_dist_std_m,

@@ -786,5 +786,87 @@ TEST(HumanoidEnv, ChairRandomConfigErrorsNameTheField) {
   EXPECT_EQ(err({{"chair_random", {{"prob", 0.5}}}}), "");
 }
 
+// Pushes (env.push) against the same env and actions without them: the centre of mass moves
+// along the push, the episode is reproducible for a seed, and with pushes off nothing is drawn.
+struct PushRun {
+  std::vector<Eigen::Vector3d> com;    // after each step [m]
+  std::vector<Eigen::Vector3d> force;  // during each step [N]
+  int pushes = 0;
+};
+PushRun RunPushed(const EnvConfig& c, uint64_t seed, int steps) {
+  HumanoidChairEnv env(c);
+  env.Seed(seed);
+  std::vector<float> obs(env.spec().obs_dim), act(21);
+  HumanoidState s = StandingPose(env.model(), 0.002);
+  s.root_pos.x() = 2.0;  // away from the chair
+  env.ResetToState(s, obs.data());
+  env.HoldPoseAction(s.q.data(), act.data());
+  PushRun out;
+  for (int t = 0; t < steps; ++t) {
+    env.Step(act.data(), obs.data());
+    out.force.push_back(env.push_force());
+    out.com.push_back(env.world().CenterOfMass());
+  }
+  out.pushes = env.pushes();
+  return out;
+}
+
+TEST(HumanoidEnv, PushesMoveThePelvisAlongTheForceForTheirDuration) {
+  EnvConfig c = PdConfig();
+  const PushRun calm = RunPushed(c, 3, 40);
+  EXPECT_EQ(calm.pushes, 0);
+  c.push.rate_hz = 100.0;  // > 1 per control step: one starts as soon as one ends
+  c.push.force_min_n = c.push.force_max_n = 150.0;
+  c.push.duration_s = 0.1;  // 6 control steps
+  c.push.delay_s = 0.04;    // none in the first 3 steps (0.05 s)
+  const PushRun pushed = RunPushed(c, 3, 40);
+  for (int t = 0; t < 3; ++t) EXPECT_EQ(pushed.force[t].norm(), 0.0) << "step " << t;
+  ASSERT_NEAR(pushed.force[3].norm(), 150.0, 1e-9);
+  EXPECT_EQ(pushed.force[3].z(), 0.0);
+  for (int t = 4; t < 9; ++t) EXPECT_EQ(pushed.force[t], pushed.force[3]) << "step " << t;
+  EXPECT_NE(pushed.force[9], pushed.force[3]);  // the next push, drawn afresh
+  EXPECT_GE(pushed.pushes, 6);
+  // After the first push (0.1 s of 150 N on 40.8 kg: 0.37 m/s), the centre of mass has moved
+  // along it, beyond what standing still does.
+  const Eigen::Vector3d dir = pushed.force[3].normalized();
+  const Eigen::Vector3d diff = pushed.com[8] - calm.com[8];
+  EXPECT_GT(diff.dot(dir), 0.01);
+  EXPECT_GT(diff.head<2>().normalized().dot(dir.head<2>()), 0.9);
+  // The same seed gives the same pushes and motion; another seed other pushes.
+  const PushRun again = RunPushed(c, 3, 40);
+  for (int t = 0; t < 40; ++t) ASSERT_EQ(again.com[t], pushed.com[t]) << "step " << t;
+  EXPECT_NE(RunPushed(c, 4, 40).force[3], pushed.force[3]);
+}
+
+TEST(HumanoidEnv, PushConfigRoundTripsAndErrorsNameTheField) {
+  EnvConfig c;
+  c.push.rate_hz = 0.5;
+  c.push.force_min_n = 20.0;
+  c.push.force_max_n = 80.0;
+  c.push.duration_s = 0.15;
+  c.push.delay_s = 0.3;
+  const EnvConfig back = EnvConfig::FromJson(c.ToJson(), "c");
+  EXPECT_EQ(back.push.rate_hz, 0.5);
+  EXPECT_EQ(back.push.force_min_n, 20.0);
+  EXPECT_EQ(back.push.force_max_n, 80.0);
+  EXPECT_EQ(back.push.duration_s, 0.15);
+  EXPECT_EQ(back.push.delay_s, 0.3);
+  EXPECT_EQ(EnvConfig::FromJson(Json::object(), "c").push.rate_hz, 0.0);  // off by default
+  auto err = [](const Json& j) {
+    try {
+      EnvConfig::FromJson(j, "e.json");
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_NE(err({{"push", {{"rate_hz", -1.0}}}}).find("e.json.push.rate_hz"), std::string::npos);
+  EXPECT_NE(err({{"push", {{"force_min_n", 50.0}, {"force_max_n", 10.0}}}}).find("force_max_n"),
+            std::string::npos);
+  EXPECT_NE(err({{"push", {{"duration_s", 0.0}}}}).find("duration_s"), std::string::npos);
+  EXPECT_NE(err({{"push", {{"rate", 1.0}}}}).find("rate"), std::string::npos);
+  EXPECT_EQ(err({{"push", {{"rate_hz", 1.0}, {"force_max_n", 60.0}}}}), "");
+}
+
 }  // namespace
 }  // namespace perch
