@@ -133,12 +133,14 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
   if (j.contains("push")) {
     const Json& p = j["push"];
     const std::string pc = ctx + ".push";
-    CheckKnownKeys(p, {"rate_hz", "force_min_n", "force_max_n", "duration_s", "delay_s"}, pc);
+    CheckKnownKeys(p, {"rate_hz", "force_min_n", "force_max_n", "duration_s", "delay_s", "until_s"},
+                   pc);
     GetOptional(p, "rate_hz", c.push.rate_hz, pc);
     GetOptional(p, "force_min_n", c.push.force_min_n, pc);
     GetOptional(p, "force_max_n", c.push.force_max_n, pc);
     GetOptional(p, "duration_s", c.push.duration_s, pc);
     GetOptional(p, "delay_s", c.push.delay_s, pc);
+    GetOptional(p, "until_s", c.push.until_s, pc);
     if (!(c.push.rate_hz >= 0.0 && c.push.rate_hz <= 100.0)) {
       throw ConfigError(pc + ".rate_hz: must be in [0, 100] pushes per second");
     }
@@ -150,6 +152,9 @@ EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
       throw ConfigError(pc + ".duration_s: must be in (0, 10] s");
     }
     if (!(c.push.delay_s >= 0.0)) throw ConfigError(pc + ".delay_s: must be >= 0");
+    if (!(c.push.until_s == 0.0 || c.push.until_s > c.push.delay_s)) {
+      throw ConfigError(pc + ".until_s: must be 0 (no end) or > delay_s");
+    }
   }
   GetOptional(j, "seat_contact_max_pelvis_z", c.seat_contact_max_pelvis_z, ctx);
   GetOptional(j, "seat_contact_relative", c.seat_contact_relative, ctx);
@@ -264,7 +269,8 @@ Json EnvConfig::ToJson() const {
         {"force_min_n", push.force_min_n},
         {"force_max_n", push.force_max_n},
         {"duration_s", push.duration_s},
-        {"delay_s", push.delay_s}}},
+        {"delay_s", push.delay_s},
+        {"until_s", push.until_s}}},
       {"seat_contact_max_pelvis_z", seat_contact_max_pelvis_z},
       {"seat_contact_relative", seat_contact_relative},
       {"chair_random",

@@ -84,14 +84,16 @@ struct SafetyConfig {
 
 // Random pushes on the pelvis, a training perturbation (ours; the paper has none): a push starts
 // in a control step with probability rate_hz * control_dt, lasts duration_s, and has a horizontal
-// force of a uniform magnitude in [force_min_n, force_max_n] in a uniform direction. Off (rate 0)
-// by default and in every evaluation config; the env's RNG is only drawn from when on.
+// force of a uniform magnitude in [force_min_n, force_max_n] in a uniform direction, starting
+// between delay_s and until_s into the episode. Off (rate 0) by default and in every evaluation
+// config; the env's RNG is only drawn from when on.
 struct PushConfig {
   double rate_hz = 0.0;      // [1/s] mean pushes per second of episode
   double force_min_n = 0.0;  // [N]
   double force_max_n = 0.0;  // [N]
   double duration_s = 0.2;   // [s]
   double delay_s = 0.0;      // [s] no push starts in the episode's first delay_s
+  double until_s = 0.0;      // [s] > 0: nor from until_s on (pushes only near the start)
 };
 
 // The `stand` task: reward for staying upright, early termination on falling, time limit.

@@ -338,7 +338,9 @@ void HumanoidChairEnv::UpdatePush() {
   // The RNG is drawn from only when pushes are on, so runs without them draw as before.
   if (p.rate_hz <= 0.0 || push_steps_left_ > 0) return;
   const double dt = config_.physics.physics_dt * config_.physics.substeps;
-  if (step_ * dt < p.delay_s || rng_.Uniform() >= p.rate_hz * dt) return;
+  const double t = step_ * dt;
+  if (t < p.delay_s || (p.until_s > 0.0 && t >= p.until_s)) return;
+  if (rng_.Uniform() >= p.rate_hz * dt) return;
   const double force = rng_.Uniform(p.force_min_n, p.force_max_n);
   const double angle = rng_.Uniform(-M_PI, M_PI);
   world_->SetRootForce(Eigen::Vector3d(force * std::cos(angle), force * std::sin(angle), 0.0));

@@ -836,6 +836,12 @@ TEST(HumanoidEnv, PushesMoveThePelvisAlongTheForceForTheirDuration) {
   const PushRun again = RunPushed(c, 3, 40);
   for (int t = 0; t < 40; ++t) ASSERT_EQ(again.com[t], pushed.com[t]) << "step " << t;
   EXPECT_NE(RunPushed(c, 4, 40).force[3], pushed.force[3]);
+  // until_s: no push starts from it on (0.26 s: pushes at steps 3, 9 and 15 only).
+  c.push.until_s = 0.26;
+  const PushRun early = RunPushed(c, 3, 40);
+  EXPECT_EQ(early.pushes, 3);
+  EXPECT_NE(early.force[20].norm(), 0.0);  // the third push (steps 15-20) still on
+  for (int t = 21; t < 40; ++t) EXPECT_EQ(early.force[t].norm(), 0.0) << "step " << t;
 }
 
 TEST(HumanoidEnv, PushConfigRoundTripsAndErrorsNameTheField) {
@@ -845,12 +851,14 @@ TEST(HumanoidEnv, PushConfigRoundTripsAndErrorsNameTheField) {
   c.push.force_max_n = 80.0;
   c.push.duration_s = 0.15;
   c.push.delay_s = 0.3;
+  c.push.until_s = 1.5;
   const EnvConfig back = EnvConfig::FromJson(c.ToJson(), "c");
   EXPECT_EQ(back.push.rate_hz, 0.5);
   EXPECT_EQ(back.push.force_min_n, 20.0);
   EXPECT_EQ(back.push.force_max_n, 80.0);
   EXPECT_EQ(back.push.duration_s, 0.15);
   EXPECT_EQ(back.push.delay_s, 0.3);
+  EXPECT_EQ(back.push.until_s, 1.5);
   EXPECT_EQ(EnvConfig::FromJson(Json::object(), "c").push.rate_hz, 0.0);  // off by default
   auto err = [](const Json& j) {
     try {
@@ -865,6 +873,8 @@ TEST(HumanoidEnv, PushConfigRoundTripsAndErrorsNameTheField) {
             std::string::npos);
   EXPECT_NE(err({{"push", {{"duration_s", 0.0}}}}).find("duration_s"), std::string::npos);
   EXPECT_NE(err({{"push", {{"rate", 1.0}}}}).find("rate"), std::string::npos);
+  EXPECT_NE(err({{"push", {{"delay_s", 1.0}, {"until_s", 0.5}}}}).find("until_s"),
+            std::string::npos);
   EXPECT_EQ(err({{"push", {{"rate_hz", 1.0}, {"force_max_n", 60.0}}}}), "");
 }
 

@@ -565,6 +565,20 @@ TEST(MetaEval, ShardsAndResumedRecordsGiveTheResultOfOneRun) {
   o.done = {records[1], records[1]};
   EXPECT_THROW(EvaluateMeta(c, meta, frozen, o), ConfigError);
   EXPECT_THROW(AggregateMeta(header, {records[0], records[0]}), ConfigError);
+  // A file written before an env field existed (here env.push) resumes while the field keeps its
+  // default, and is refused once the run sets it.
+  {
+    Json old_header = header;
+    old_header["env"].erase("push");
+    ASSERT_NE(FirstHeaderDifference(header, old_header), "");
+    const Json read =
+        ParseMetaRecords(MetaRecordsHeaderLine(old_header) + "\n", "old.jsonl").header;
+    EXPECT_EQ(FirstHeaderDifference(read, header), "");
+    TaskEnvConfig pushed = c;
+    pushed.env.push.rate_hz = 1.0;
+    EXPECT_EQ(FirstHeaderDifference(read, MetaEvalHeader(pushed, meta, frozen, o)),
+              "env.push.rate_hz");
+  }
   // The header tells other trials apart, naming the field; where the files were does not count.
   o.seed = 12;
   Json moved = header;
