@@ -40,7 +40,7 @@ MetaConfig MetaConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
   CheckKnownKeys(j,
                  {"choices", "period", "subtask_stochastic", "fixed_order", "observe_active",
-                  "active_time_scale_s", "observe_values", "subtasks", "planner"},
+                  "active_time_scale_s", "observe_values", "blend_steps", "subtasks", "planner"},
                  ctx);
   MetaConfig c;
   GetOptional(j, "choices", c.choices, ctx);
@@ -50,6 +50,10 @@ MetaConfig MetaConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "observe_active", c.observe_active, ctx);
   GetOptional(j, "active_time_scale_s", c.active_time_scale_s, ctx);
   GetOptional(j, "observe_values", c.observe_values, ctx);
+  GetOptional(j, "blend_steps", c.blend_steps, ctx);
+  if (c.blend_steps < 0 || c.blend_steps > 120) {
+    throw ConfigError(ctx + ".blend_steps: must be in [0, 120] control steps");
+  }
   if (j.contains("planner")) c.planner = PlannerConfig::FromJson(j["planner"], ctx + ".planner");
   if (!(c.active_time_scale_s > 0)) throw ConfigError(ctx + ".active_time_scale_s: must be > 0");
   if (j.contains("subtasks")) {
@@ -94,6 +98,7 @@ Json MetaConfig::ToJson() const {
               {"observe_active", observe_active},
               {"active_time_scale_s", active_time_scale_s},
               {"observe_values", observe_values},
+              {"blend_steps", blend_steps},
               {"planner", planner.ToJson()},
               {"subtasks", subs}};
 }

@@ -56,6 +56,7 @@ MetaEnv::MetaEnv(const TaskEnvConfig& config) : config_(config) {
       static_cast<int>(std::ceil(task_config_.success_contact_s / inner.control_dt - 1e-9));
   inner_obs_.resize(inner.obs_dim);
   action_.resize(inner.act_dim);
+  blend_action_.resize(inner.act_dim);
 }
 
 MetaEnv::~MetaEnv() = default;
@@ -114,6 +115,7 @@ void MetaEnv::Reset(float* obs) {
   episode_.min_dist_m = prev_dist_;
   episode_.spawn_theta = task_->spawn_theta();
   active_steps_ = 0;
+  blend_left_ = 0;
   WriteObservation(obs);
 }
 
@@ -159,6 +161,10 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
   bool term = false, trunc = false;
   for (int k = 0; k < meta_.period && !term && !trunc; ++k) {
     if (!begun_ || sub != active_) {
+      if (begun_ && meta_.blend_steps > 0) {
+        blend_from_ = active_;
+        blend_left_ = meta_.blend_steps;
+      }
       // A subtask (re)starts: a turn's reference clock begins now.
       policies_->Begin(sub, *env_);
       active_ = sub;
@@ -170,6 +176,16 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
     }
     task_->set_active(sub);
     policies_->Act(sub, *env_, rng_, !meta_.subtask_stochastic, action_.data());
+    if (blend_left_ > 0) {
+      // The previous subtask acts on its own clock, as if it had kept running.
+      policies_->Act(blend_from_, *env_, rng_, !meta_.subtask_stochastic, blend_action_.data());
+      const float w = static_cast<float>(meta_.blend_steps - blend_left_ + 1) /
+                      static_cast<float>(meta_.blend_steps + 1);
+      for (size_t i = 0; i < action_.size(); ++i) {
+        action_[i] = w * action_[i] + (1.0f - w) * blend_action_[i];
+      }
+      --blend_left_;
+    }
     const StepResult r = env_->Step(action_.data(), inner_obs_.data());
     ++episode_.control_steps;
     ++active_steps_;
@@ -220,6 +236,8 @@ MetaEnvState MetaEnv::SaveState() const {
   s.order_pos = order_pos_;
   s.begun = begun_;
   s.active_steps = active_steps_;
+  s.blend_from = blend_from_;
+  s.blend_left = blend_left_;
   s.contact_run = contact_run_;
   s.prev_dist = prev_dist_;
   s.episode = episode_;
@@ -238,6 +256,8 @@ void MetaEnv::RestoreState(const MetaEnvState& s) {
   order_pos_ = s.order_pos;
   begun_ = s.begun;
   active_steps_ = s.active_steps;
+  blend_from_ = s.blend_from;
+  blend_left_ = s.blend_left;
   contact_run_ = s.contact_run;
   prev_dist_ = s.prev_dist;
   episode_ = s.episode;

@@ -53,6 +53,7 @@ struct MetaEnvState {
   int active = 0, order_pos = 0;
   bool begun = false;
   int active_steps = 0, contact_run = 0;
+  int blend_from = 0, blend_left = 0;
   double prev_dist = 0.0;  // [m]
   MetaEpisode episode;
 };
@@ -104,7 +105,9 @@ class MetaEnv : public Env, public FrozenPolicyEnv {
   std::unique_ptr<SubtaskPolicies> policies_;
   EnvSpec spec_;
   Rng rng_;  // the subtasks' action noise
-  std::vector<float> inner_obs_, action_;
+  std::vector<float> inner_obs_, action_, blend_action_;
+  int blend_from_ = 0;  // meta.blend_steps: the subtask faded out, for blend_left_ more steps
+  int blend_left_ = 0;
   int active_ = kWalk;
   int order_pos_ = 0;  // fixed_order: index in choices of the running subtask
   bool begun_ = false;

@@ -840,5 +840,80 @@ TEST(MetaEnv, ARestoredEpisodeGoesOnAsTheSavingEnvDoes) {
   EXPECT_EQ(a.active(), b.active());
 }
 
+// meta.blend_steps: after a switch the humanoid gets the cross-fade of the old subtask's action and
+// the new one's, then the new one's alone; a restore in the middle of a fade goes on as the saver.
+TEST(MetaEnv, ASwitchCrossFadesTheOldSubtasksActionIntoTheNewOnes) {
+  auto config = [](int blend) {
+    TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"});
+    auto& m = c.MutableSection<SitChairTaskConfig>().meta;
+    m.period = 10;
+    m.subtask_stochastic = false;  // mean actions: the fade is exact
+    m.blend_steps = blend;
+    return c;
+  };
+  const std::vector<FrozenPolicyData> p = Untrained();
+  // keep: walks on; cut: switches to the left turn at once; fade: switches with a 4-step fade.
+  struct Run {
+    std::unique_ptr<MetaEnv> env;
+    std::vector<std::array<double, HumanoidModel::kNumJoints>> tau;  // per control step [N m]
+  };
+  auto start = [&](int blend) {
+    auto r = std::make_unique<Run>();
+    r->env = std::make_unique<MetaEnv>(config(blend));
+    r->env->SetFrozenPolicies(p);
+    Run* raw = r.get();
+    r->env->on_control_step = [raw](const HumanoidChairEnv& e, const StepResult&, int) {
+      raw->tau.push_back(e.last_torques());
+    };
+    r->env->Seed(21);
+    std::vector<float> obs(57), walk{3.0f, 0.1f, 2.0f};
+    r->env->Reset(obs.data());
+    r->env->Step(walk.data(), obs.data());
+    return r;
+  };
+  auto keep = start(0), cut = start(0), fade = start(4);
+  ASSERT_EQ(fade->tau, cut->tau);  // the walker alone so far
+  std::vector<float> obs(57), walk{3.0f, 0.1f, 2.0f}, left{0.0f, 0.1f, 2.0f};
+  keep->env->Step(walk.data(), obs.data());
+  cut->env->Step(left.data(), obs.data());
+  fade->env->Step(left.data(), obs.data());
+  ASSERT_EQ(fade->tau.size(), 20u);
+  // The first step after the switch starts from one state in all three: the fade's torque is
+  // 1/5 of the turn's plus 4/5 of the walker's wherever neither saturates.
+  const HumanoidModel& model = fade->env->humanoid().model();
+  int linear = 0;
+  for (int j = 0; j < model.num_joints(); ++j) {
+    const double max = model.joint(j).max_torque;
+    const double a = cut->tau[10][j], b = keep->tau[10][j];
+    if (std::abs(a) >= max || std::abs(b) >= max) continue;
+    EXPECT_NEAR(fade->tau[10][j], 0.2 * a + 0.8 * b, 1e-4 * max) << "joint " << j;
+    ++linear;
+  }
+  EXPECT_GE(linear, 5);
+  EXPECT_NE(fade->tau[10], cut->tau[10]);
+  EXPECT_EQ(fade->env->episode().sequence, cut->env->episode().sequence);
+  // A fade longer than a meta step: saved with 5 of its 15 steps to go, restored into another env.
+  auto a = start(15), b = start(15);
+  a->env->Step(left.data(), obs.data());
+  const MetaEnvState s = a->env->SaveState();
+  EXPECT_EQ(s.blend_left, 5);
+  a->env->RestoreState(s);  // both restored: a restore empties Bullet's contact caches
+  b->env->RestoreState(s);
+  a->tau.clear();
+  b->tau.clear();
+  a->env->Step(left.data(), obs.data());
+  b->env->Step(left.data(), obs.data());
+  EXPECT_EQ(a->tau, b->tau);
+  EXPECT_GE(a->tau.size(), 6u);  // past the fade's end (the untrained turn may fall after it)
+  // Refused out of range, by name.
+  Json bad{{"task", "sit_chair"}, {"sit_chair", {{"meta", {{"blend_steps", -1}}}}}};
+  try {
+    TaskEnvConfig::FromJson(bad, "t");
+    ADD_FAILURE() << "blend_steps -1 accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("blend_steps"), std::string::npos);
+  }
+}
+
 }  // namespace
 }  // namespace perch
