@@ -768,22 +768,24 @@ TEST(HumanoidEnv, SeatContactHeightFollowsTheSeatUnlessAbsolute) {
   EXPECT_NEAR(HumanoidChairEnv(c).SeatContactMaxPelvisZ(), 0.54, 1e-12);
 }
 
+// The ConfigError an env config (read as "e.json") is refused with; "" when it is accepted.
+std::string EnvConfigError(const Json& j) {
+  try {
+    EnvConfig::FromJson(j, "e.json");
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  return "";
+}
+
 TEST(HumanoidEnv, ChairRandomConfigErrorsNameTheField) {
-  auto err = [](const Json& j) {
-    try {
-      EnvConfig::FromJson(j, "e.json");
-    } catch (const ConfigError& e) {
-      return std::string(e.what());
-    }
-    return std::string();
-  };
-  EXPECT_NE(err({{"chair_random", {{"prob", 2.0}}}}).find("e.json.chair_random.prob"),
+  EXPECT_NE(EnvConfigError({{"chair_random", {{"prob", 2.0}}}}).find("e.json.chair_random.prob"),
             std::string::npos);
-  EXPECT_NE(err({{"chair_random", {{"seat_height", {0.5, 0.3}}}}}).find("seat_height"),
+  EXPECT_NE(EnvConfigError({{"chair_random", {{"seat_height", {0.5, 0.3}}}}}).find("seat_height"),
             std::string::npos);
-  EXPECT_NE(err({{"chair_random", {{"seat_hieght", {0.3, 0.5}}}}}).find("seat_hieght"),
+  EXPECT_NE(EnvConfigError({{"chair_random", {{"seat_hieght", {0.3, 0.5}}}}}).find("seat_hieght"),
             std::string::npos);
-  EXPECT_EQ(err({{"chair_random", {{"prob", 0.5}}}}), "");
+  EXPECT_EQ(EnvConfigError({{"chair_random", {{"prob", 0.5}}}}), "");
 }
 
 // Pushes (env.push) against the same env and actions without them: the centre of mass moves
@@ -860,22 +862,17 @@ TEST(HumanoidEnv, PushConfigRoundTripsAndErrorsNameTheField) {
   EXPECT_EQ(back.push.delay_s, 0.3);
   EXPECT_EQ(back.push.until_s, 1.5);
   EXPECT_EQ(EnvConfig::FromJson(Json::object(), "c").push.rate_hz, 0.0);  // off by default
-  auto err = [](const Json& j) {
-    try {
-      EnvConfig::FromJson(j, "e.json");
-    } catch (const ConfigError& e) {
-      return std::string(e.what());
-    }
-    return std::string();
-  };
-  EXPECT_NE(err({{"push", {{"rate_hz", -1.0}}}}).find("e.json.push.rate_hz"), std::string::npos);
-  EXPECT_NE(err({{"push", {{"force_min_n", 50.0}, {"force_max_n", 10.0}}}}).find("force_max_n"),
+  EXPECT_NE(EnvConfigError({{"push", {{"rate_hz", -1.0}}}}).find("e.json.push.rate_hz"),
             std::string::npos);
-  EXPECT_NE(err({{"push", {{"duration_s", 0.0}}}}).find("duration_s"), std::string::npos);
-  EXPECT_NE(err({{"push", {{"rate", 1.0}}}}).find("rate"), std::string::npos);
-  EXPECT_NE(err({{"push", {{"delay_s", 1.0}, {"until_s", 0.5}}}}).find("until_s"),
+  EXPECT_NE(EnvConfigError({{"push", {{"force_min_n", 50.0}, {"force_max_n", 10.0}}}})
+                .find("force_max_n"),
             std::string::npos);
-  EXPECT_EQ(err({{"push", {{"rate_hz", 1.0}, {"force_max_n", 60.0}}}}), "");
+  EXPECT_NE(EnvConfigError({{"push", {{"duration_s", 0.0}}}}).find("duration_s"),
+            std::string::npos);
+  EXPECT_NE(EnvConfigError({{"push", {{"rate", 1.0}}}}).find("rate"), std::string::npos);
+  EXPECT_NE(EnvConfigError({{"push", {{"delay_s", 1.0}, {"until_s", 0.5}}}}).find("until_s"),
+            std::string::npos);
+  EXPECT_EQ(EnvConfigError({{"push", {{"rate_hz", 1.0}, {"force_max_n", 60.0}}}}), "");
 }
 
 }  // namespace
