@@ -1,85 +1,42 @@
 #include "learner/service/checkpoint.h"
 
 #include <dirent.h>
-#include <fcntl.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
-#include <fstream>
-#include <sstream>
+#include <filesystem>
 #include <stdexcept>
+
+#include "common/json_util.h"  // ConfigError
 
 namespace perch {
 namespace {
 
 constexpr char kMagic[8] = {'P', 'E', 'R', 'C', 'H', 'C', 'K', 'P'};
-constexpr size_t kHeaderSize = 8 + 4 + 8 + 4;
-
-void PutLe(std::string* s, uint64_t v, int bytes) {
-  for (int i = 0; i < bytes; ++i) s->push_back(static_cast<char>((v >> (8 * i)) & 0xff));
-}
-uint64_t GetLe(const std::string& s, size_t off, int bytes) {
-  uint64_t v = 0;
-  for (int i = 0; i < bytes; ++i) v |= uint64_t{static_cast<unsigned char>(s[off + i])} << (8 * i);
-  return v;
-}
-
-void MakeDirs(const std::string& path) {
-  std::string cur;
-  std::stringstream ss(path);
-  std::string part;
-  if (!path.empty() && path[0] == '/') cur = "/";
-  while (std::getline(ss, part, '/')) {
-    if (part.empty()) continue;
-    cur += part + "/";
-    if (::mkdir(cur.c_str(), 0755) != 0 && errno != EEXIST) {
-      throw std::runtime_error(cur + ": cannot create directory: " + std::strerror(errno));
-    }
-  }
-}
 
 }  // namespace
 
 std::string FrameCheckpoint(const proto::Checkpoint& ckpt) {
   std::string payload;
   if (!ckpt.SerializeToString(&payload)) throw std::runtime_error("checkpoint: serialize failed");
-  std::string out(kMagic, sizeof(kMagic));
-  PutLe(&out, kCheckpointFormat, 4);
-  PutLe(&out, payload.size(), 8);
-  PutLe(&out, Crc32(payload.data(), payload.size()), 4);
-  out += payload;
-  return out;
+  return FramePayload(kMagic, kCheckpointFormat, payload);
 }
 
 proto::Checkpoint ReadCheckpointFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw CheckpointError(path + ": cannot open checkpoint");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const std::string data = ss.str();
-  if (data.size() < kHeaderSize || std::memcmp(data.data(), kMagic, sizeof(kMagic)) != 0) {
-    throw CheckpointError(path + ": not a Perch checkpoint (bad magic or shorter than header)");
-  }
-  const uint32_t format = static_cast<uint32_t>(GetLe(data, 8, 4));
-  if (format != kCheckpointFormat) {
-    throw CheckpointError(path + ": checkpoint format " + std::to_string(format) +
-                          ", this build reads format " + std::to_string(kCheckpointFormat));
-  }
-  const uint64_t len = GetLe(data, 12, 8);
-  if (len != data.size() - kHeaderSize) {
-    throw CheckpointError(path + ": truncated or padded: header says " + std::to_string(len) +
-                          " payload bytes, file has " + std::to_string(data.size() - kHeaderSize));
-  }
-  const uint32_t crc = static_cast<uint32_t>(GetLe(data, 20, 4));
-  if (Crc32(data.data() + kHeaderSize, len) != crc) {
-    throw CheckpointError(path + ": CRC mismatch (corrupt checkpoint)");
+  // The shared reader and frame check (common/file_util.h); their ConfigError becomes a
+  // CheckpointError, which the store's fallback to an older checkpoint catches.
+  std::string payload;
+  try {
+    payload = UnframePayload(ReadFileBytes(path, "checkpoint"), path, kMagic, kCheckpointFormat,
+                             "checkpoint");
+  } catch (const ConfigError& e) {
+    throw CheckpointError(e.what());
   }
   proto::Checkpoint ckpt;
-  if (!ckpt.ParseFromArray(data.data() + kHeaderSize, static_cast<int>(len))) {
+  if (!ckpt.ParseFromString(payload)) {
     throw CheckpointError(path + ": payload does not parse as perch.proto.Checkpoint");
   }
   if (ckpt.wire_version() != proto::WIRE_VERSION_CURRENT) {
@@ -120,7 +77,9 @@ std::vector<uint64_t> CheckpointStore::List() const {
 }
 
 std::string CheckpointStore::Save(const proto::Checkpoint& ckpt) {
-  MakeDirs(dir_);
+  std::error_code ec;
+  std::filesystem::create_directories(dir_, ec);
+  if (ec) throw std::runtime_error(dir_ + ": cannot create directory: " + ec.message());
   const uint64_t update = ckpt.counters().updates();
   const std::string path = PathFor(update);
   WriteFileAtomic(path, FrameCheckpoint(ckpt));

@@ -199,7 +199,7 @@ TEST_F(ClusterProcessTest, CorruptNewestCheckpointFallsBackToPrevious) {
   ASSERT_TRUE(WaitFor(l2.pid, 40.0, &status)) << ReadFile(l2.log);
   l2.pid = -1;
   const std::string log = ReadFile(l2.log);
-  EXPECT_NE(log.find(newest + ": CRC mismatch"), std::string::npos) << log;
+  EXPECT_NE(log.find(newest + ": checkpoint CRC-32 mismatch"), std::string::npos) << log;
   EXPECT_NE(log.find("resumed from " + run_dir_ + "/checkpoints/ckpt-0000000002.bin"),
             std::string::npos)
       << log;

@@ -68,12 +68,35 @@ TEST(CheckpointTest, DetectsCorruptionTruncationAndGarbage) {
     EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
   }
 
+  // Each refusal names the file and its reason.
+  auto ErrorOf = [](const std::string& p) -> std::string {
+    try {
+      ReadCheckpointFile(p);
+    } catch (const CheckpointError& e) {
+      return e.what();
+    }
+    return "(accepted)";
+  };
   WriteAll(path, good.substr(0, good.size() / 2));
-  EXPECT_THROW(ReadCheckpointFile(path), CheckpointError);
+  EXPECT_EQ(ErrorOf(path).rfind(path + ": checkpoint payload is", 0), 0u) << ErrorOf(path);
+  EXPECT_NE(ErrorOf(path).find("truncated"), std::string::npos) << ErrorOf(path);
   WriteAll(path, "not a checkpoint at all");
-  EXPECT_THROW(ReadCheckpointFile(path), CheckpointError);
+  EXPECT_EQ(ErrorOf(path).rfind(path + ": not a checkpoint", 0), 0u) << ErrorOf(path);
   WriteAll(path, "");
-  EXPECT_THROW(ReadCheckpointFile(path), CheckpointError);
+  EXPECT_EQ(ErrorOf(path).rfind(path + ": not a checkpoint", 0), 0u) << ErrorOf(path);
+  std::string other_format = good;
+  other_format[8] = 7;
+  WriteAll(path, other_format);
+  EXPECT_NE(ErrorOf(path).find("checkpoint format 7, this build reads 1"), std::string::npos)
+      << ErrorOf(path);
+  // A directory and a missing file: read errors, not "a shorter file".
+  const std::string dir = TempDir();
+  EXPECT_NE(ErrorOf(dir).find(": cannot read checkpoint"), std::string::npos) << ErrorOf(dir);
+  EXPECT_NE(ErrorOf(dir + "/none.bin").find(": cannot open checkpoint"), std::string::npos)
+      << ErrorOf(dir + "/none.bin");
+  // The good bytes still read after all that.
+  WriteAll(path, good);
+  EXPECT_EQ(ReadCheckpointFile(path).counters().updates(), 1u);
 }
 
 TEST(CheckpointTest, RotationKeepsLastNAndMilestones) {
