@@ -430,14 +430,7 @@ Json EvaluateChain(const TaskEnvConfig& config,
         begun = phase;
       }
       if (e == 0 && frames != nullptr) {
-        const HumanoidState& s = env->humanoid_state();
-        PoseFrame f;
-        f.root_pos = s.root_pos;
-        f.root_quat = s.root_quat;
-        f.q.assign(s.q.begin(), s.q.end());
-        f.time_s = k * dt;
-        f.label = SubtaskName(phase);
-        frames->push_back(f);
+        frames->push_back(PoseFrameOf(env->humanoid_state(), k * dt, SubtaskName(phase)));
       }
       policies.Act(phase, *env, act_rng, !o.stochastic, action.data());
       const StepResult r = env->Step(action.data(), obs.data());

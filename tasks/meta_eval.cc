@@ -58,14 +58,8 @@ TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int tri
   const double dt = env.humanoid().spec().control_dt;
   if (frames != nullptr) {
     env.on_control_step = [&](const HumanoidChairEnv& h, const StepResult&, int active) {
-      const HumanoidState& st = h.humanoid_state();
-      PoseFrame f;
-      f.root_pos = st.root_pos;
-      f.root_quat = st.root_quat;
-      f.q.assign(st.q.begin(), st.q.end());
-      f.time_s = h.episode_step() * dt;
-      f.label = SubtaskName(active);
-      frames->push_back(f);
+      frames->push_back(
+          PoseFrameOf(h.humanoid_state(), h.episode_step() * dt, SubtaskName(active)));
     };
   }
   std::vector<proto::BankState> sit_starts;

@@ -52,13 +52,7 @@ Json EvaluateEpisodes(const TaskEnvConfig& config, const proto::ModelWeights& we
     if (o.recorder != nullptr) o.recorder->Begin(*env, e, 2 * episode_seed);
     auto record = [&](int step) {
       if (e != 0 || rec == nullptr) return;
-      const HumanoidState& s = env->humanoid_state();
-      PoseFrame f;
-      f.root_pos = s.root_pos;
-      f.root_quat = s.root_quat;
-      f.q.assign(s.q.begin(), s.q.end());
-      f.time_s = step * dt;
-      rec->frames.push_back(f);
+      rec->frames.push_back(PoseFrameOf(env->humanoid_state(), step * dt));
     };
     record(0);
     int steps = 0;

@@ -74,13 +74,7 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
     if (o.recorder != nullptr) o.recorder->Begin(*env, e, 2 * episode_seed);
     auto record = [&](int step) {
       if (e != 0 || rec == nullptr) return;
-      const HumanoidState& s = env->humanoid_state();
-      PoseFrame f;
-      f.root_pos = s.root_pos;
-      f.root_quat = s.root_quat;
-      f.q.assign(s.q.begin(), s.q.end());
-      f.time_s = step * dt;
-      rec->frames.push_back(f);
+      rec->frames.push_back(PoseFrameOf(env->humanoid_state(), step * dt));
       if (target_mode &&
           (rec->targets.empty() || (rec->targets.back() - env->walk_target()).norm() > 1e-9)) {
         rec->targets.push_back(env->walk_target());

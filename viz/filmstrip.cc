@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
+#include <utility>
 
 namespace perch {
 namespace {
@@ -200,6 +201,16 @@ Canvas RenderFilmstrip(const HumanoidModel& model, const Chair* chair,
   }
   strip.FillRect(0, px, strip.width() - 1, px, kSeparator);
   return strip;
+}
+
+PoseFrame PoseFrameOf(const HumanoidState& s, double time_s, std::string label) {
+  PoseFrame f;
+  f.root_pos = s.root_pos;
+  f.root_quat = s.root_quat;
+  f.q.assign(s.q.begin(), s.q.end());
+  f.time_s = time_s;
+  f.label = std::move(label);
+  return f;
 }
 
 }  // namespace perch

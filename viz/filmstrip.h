@@ -4,13 +4,13 @@
 // see a gait or a sit without a 3D viewer. Pure C++ (FK from the model), no Bullet.
 #pragma once
 
+#include <Eigen/Geometry>
 #include <string>
 #include <vector>
 
-#include <Eigen/Geometry>
-
 #include "envs/chair.h"
 #include "envs/humanoid_model.h"
+#include "envs/humanoid_world.h"  // HumanoidState (plain data, no Bullet)
 #include "viz/canvas.h"
 
 namespace perch {
@@ -22,6 +22,9 @@ struct PoseFrame {
   double time_s = 0.0;
   std::string label;  // drawn after the time stamp (e.g. the active subtask); may be empty
 };
+
+// The frame of a simulated humanoid's state at `time_s` [s], labelled `label`.
+PoseFrame PoseFrameOf(const HumanoidState& s, double time_s, std::string label = "");
 
 struct FilmstripOptions {
   int panel_px = 220;          // each panel is panel_px x panel_px

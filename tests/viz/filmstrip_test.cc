@@ -34,6 +34,22 @@ struct Mapper {
   }
 };
 
+TEST(Filmstrip, PoseFrameOfCopiesTheSimulatedStateInObservationOrder) {
+  HumanoidState s;
+  s.root_pos = Eigen::Vector3d(0.5, -1.25, 0.9);
+  s.root_quat = Eigen::Quaterniond(Eigen::AngleAxisd(0.7, Eigen::Vector3d::UnitZ()));
+  for (int i = 0; i < HumanoidModel::kNumJoints; ++i) s.q[i] = 0.01 * (i + 1);
+  s.qd.fill(3.0);  // speeds are not drawn
+  const PoseFrame f = PoseFrameOf(s, 1.5, "sit");
+  EXPECT_EQ(f.root_pos, s.root_pos);
+  EXPECT_TRUE(f.root_quat.isApprox(s.root_quat));
+  ASSERT_EQ(f.q.size(), static_cast<size_t>(HumanoidModel::kNumJoints));
+  for (int i = 0; i < HumanoidModel::kNumJoints; ++i) EXPECT_EQ(f.q[i], s.q[i]) << i;
+  EXPECT_EQ(f.time_s, 1.5);
+  EXPECT_EQ(f.label, "sit");
+  EXPECT_EQ(PoseFrameOf(s, 0.0).label, "");
+}
+
 TEST(Filmstrip, StandingHumanoidIsDrawnWhereFkPutsIt) {
   const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
   FilmstripOptions opt;
