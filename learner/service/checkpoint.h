@@ -11,14 +11,16 @@
 #include <string>
 #include <vector>
 
-#include "common/file_util.h"  // Crc32, WriteFileAtomic
+#include "common/file_util.h"  // Crc32, FramePayload, WriteFileAtomic
 #include "common/proto/wire.pb.h"
 
 namespace perch {
 
 constexpr uint32_t kCheckpointFormat = 1;
 
-// Frame/unframe. ParseCheckpointFile throws CheckpointError naming the file and the problem.
+// Frame/unframe (the shared frame of common/file_util.h). ReadCheckpointFile throws
+// CheckpointError naming the file and the problem (unreadable, not a checkpoint, another format,
+// truncated, CRC mismatch, another wire version).
 std::string FrameCheckpoint(const proto::Checkpoint& ckpt);
 
 class CheckpointError : public std::runtime_error {
