@@ -658,15 +658,7 @@ void LearnerService::Train() {
                   e.what());
     counters_.set_rejected(counters_.rejected() + batch_.size());
     stats_.rejected_by_kind["ppo"] += batch_.size();
-    batch_.clear();
-    batch_samples_ = 0;
-    batch_lag_sum_ = 0;
-    batch_segments_ = 0;
-    batch_returns_.clear();
-    batch_lengths_.clear();
-    batch_terminated_ = 0;
-    batch_judged_ = 0;
-    batch_succeeded_ = 0;
+    ClearBatch();
     return;
   }
   // A group counts the whole group's samples, so budgets and rates are the group's.
@@ -681,6 +673,15 @@ void LearnerService::Train() {
   if (!batch_returns_.empty()) last_return_mean_ = Mean(batch_returns_);
   WriteMetrics(u, now - t0, batch_samples_);
   last_update_s_ = now;
+  ClearBatch();
+  // What arrived while training (stamped with the old version: lag 1 now) starts the next batch,
+  // and the new credit counts it (flow control).
+  DrainRollouts();
+  GrantCredit();
+  if (counters_.updates() % setup_.cluster.checkpoint_every == 0) SaveCheckpoint();
+}
+
+void LearnerService::ClearBatch() {
   batch_.clear();
   batch_samples_ = 0;
   batch_lag_sum_ = 0;
@@ -690,11 +691,6 @@ void LearnerService::Train() {
   batch_terminated_ = 0;
   batch_judged_ = 0;
   batch_succeeded_ = 0;
-  // What arrived while training (stamped with the old version: lag 1 now) starts the next batch,
-  // and the new credit counts it (flow control).
-  DrainRollouts();
-  GrantCredit();
-  if (counters_.updates() % setup_.cluster.checkpoint_every == 0) SaveCheckpoint();
 }
 
 void LearnerService::DrainRollouts() {

@@ -115,6 +115,7 @@ class LearnerService {
   void Publish(bool republish);
   void Train();
   void DrainRollouts();           // queued segments into the batch, up to a full batch
+  void ClearBatch();              // empties the batch and the statistics gathered with it
   double CreditPerActor() const;  // cluster.credit_slack: segments per actor for this version
   // A new grant, published with the weights; stalled: the batch stopped filling, so the grant
   // must grow.
@@ -123,9 +124,8 @@ class LearnerService {
   void UpdateGauges();
   int ActorsAlive() const;
   void SeeActor(uint64_t instance, double now);  // liveness, bounded (kMaxTrackedActors)
-  void PruneActors(double now);
-  void DrainMonitors();  // counts handshake failures reported by the socket monitors // forgets
-                         // actors silent for actor_timeout_s
+  void PruneActors(double now);                  // forgets actors silent for actor_timeout_s
+  void DrainMonitors();  // counts handshake failures reported by the socket monitors
   void Resume();
   void InitFrom();  // cluster.init_from, for a new run
 
