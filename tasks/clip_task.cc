@@ -114,22 +114,12 @@ HumanoidState ClipTask::StartState(const ClipPlacement& placement, double t0,
 
 ClipTask::Similarity ClipTask::ComputeSimilarity(const SimilarityRewardConfig& c,
                                                  const HumanoidChairEnv& env, int k) const {
-  constexpr int n = HumanoidModel::kNumJoints;
   const HumanoidState& s = env.humanoid_state();
   const MotionPose ref = ReferenceAt(k);
-  const bool fd = c.finite_difference_velocities;
   MotionPose ref_prev;
-  if (fd) ref_prev = ReferenceAt(k - 1);
-  double qdot[n], qdot_ref[n];
-  for (int j = 0; j < n; ++j) {
-    qdot[j] = fd ? (s.q[j] - m_.prev_q[j]) / dt_ : s.qd[j];
-    qdot_ref[j] = fd ? (ref.q[j] - ref_prev.q[j]) / dt_ : ref.qdot[j];
-  }
-  Similarity r;
-  r.pose = PoseReward(s.q.data(), ref.q.data(), n, c.alpha_pose);
-  r.joint_vel = JointVelocityReward(qdot, qdot_ref, n, c.alpha_vel);
-  r.total = c.w_pose * r.pose + c.w_vel * r.joint_vel;
-  return r;
+  if (c.finite_difference_velocities) ref_prev = ReferenceAt(k - 1);
+  return SimilarityTermsAt(c, s.q.data(), m_.prev_q.data(), s.qd.data(), ref.q.data(),
+                           ref_prev.q.data(), ref.qdot.data(), HumanoidModel::kNumJoints, dt_);
 }
 
 void ClipTask::RootVelocities(bool fd, const HumanoidChairEnv& env, int k, Eigen::Vector3d* v,

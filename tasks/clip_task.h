@@ -84,9 +84,7 @@ class ClipTask : public Task {
   HumanoidState StartState(const ClipPlacement& placement, double t0, bool zero_joint_speeds);
   // Similarity terms at step k against ReferenceAt(k) (velocities by finite differences when
   // c.finite_difference_velocities, notes 3.1). Uses the memory's previous pose.
-  struct Similarity {
-    double pose = 0.0, joint_vel = 0.0, total = 0.0;
-  };
+  using Similarity = SimilarityTerms;
   Similarity ComputeSimilarity(const SimilarityRewardConfig& c, const HumanoidChairEnv& env,
                                int step) const;
   // Root velocity (world) by finite difference or from the simulator, and the reference's.

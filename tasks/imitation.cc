@@ -1,6 +1,7 @@
 #include "tasks/imitation.h"
 
 #include <cmath>
+#include <vector>
 
 namespace perch {
 
@@ -57,6 +58,28 @@ double SimilarityReward(const SimilarityRewardConfig& c, const double* q, const 
                         const double* qdot, const double* qdot_ref, int n) {
   return c.w_pose * PoseReward(q, q_ref, n, c.alpha_pose) +
          c.w_vel * JointVelocityReward(qdot, qdot_ref, n, c.alpha_vel);
+}
+
+SimilarityTerms SimilarityTermsAt(const SimilarityRewardConfig& c, const double* q,
+                                  const double* q_prev, const double* qdot, const double* q_ref,
+                                  const double* q_ref_prev, const double* qdot_ref, int n,
+                                  double dt) {
+  std::vector<double> fd_qdot, fd_qdot_ref;
+  if (c.finite_difference_velocities) {
+    fd_qdot.resize(n);
+    fd_qdot_ref.resize(n);
+    for (int j = 0; j < n; ++j) {
+      fd_qdot[j] = (q[j] - q_prev[j]) / dt;
+      fd_qdot_ref[j] = (q_ref[j] - q_ref_prev[j]) / dt;
+    }
+    qdot = fd_qdot.data();
+    qdot_ref = fd_qdot_ref.data();
+  }
+  SimilarityTerms t;
+  t.pose = PoseReward(q, q_ref, n, c.alpha_pose);
+  t.joint_vel = JointVelocityReward(qdot, qdot_ref, n, c.alpha_vel);
+  t.total = c.w_pose * t.pose + c.w_vel * t.joint_vel;
+  return t;
 }
 
 double RootVelocityReward(const double* v, const double* v_ref, double w, double alpha) {

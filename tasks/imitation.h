@@ -37,6 +37,21 @@ double JointVelocityReward(const double* qdot, const double* qdot_ref, int n, do
 double SimilarityReward(const SimilarityRewardConfig& c, const double* q, const double* q_ref,
                         const double* qdot, const double* qdot_ref, int n);
 
+// The terms of r^S at one control step, for n joints.
+struct SimilarityTerms {
+  double pose = 0.0;       // r^p
+  double joint_vel = 0.0;  // r^v
+  double total = 0.0;      // r^S
+};
+// The joint velocities compared are the simulator's and the reference's stored ones (qdot,
+// qdot_ref), or with c.finite_difference_velocities (the authors', notes 3.1) each pose's change
+// since the previous control step over dt [s] (q_prev, q_ref_prev); only the pair used is read.
+// Every imitation task computes r^S here, so all of them read the config alike.
+SimilarityTerms SimilarityTermsAt(const SimilarityRewardConfig& c, const double* q,
+                                  const double* q_prev, const double* qdot, const double* q_ref,
+                                  const double* q_ref_prev, const double* qdot_ref, int n,
+                                  double dt);
+
 // Eq. 4 (stage-1 walk): w exp(-alpha |v - vhat|^2) with v the 3-D root velocity [m/s].
 double RootVelocityReward(const double* v, const double* v_ref, double w, double alpha);
 // Eq. 5 (stage-2 walk): w / (1 + exp(k V)), V = (D_next - D_now) / dt: the rate of change of

@@ -275,15 +275,13 @@ TaskStep WalkTask::OnStep(const HumanoidChairEnv& env, const float* /*action*/) 
   MotionPose ref_prev;
   if (fd) ref_prev = ReferenceAt(k - 1);
 
-  double qdot[n], qdot_ref[n];
-  for (int j = 0; j < n; ++j) {
-    qdot[j] = fd ? (s.q[j] - m_.prev_q[j]) / dt_ : s.qd[j];
-    qdot_ref[j] = fd ? (ref.q[j] - ref_prev.q[j]) / dt_ : ref.qdot[j];
-  }
+  const SimilarityTerms sim =
+      SimilarityTermsAt(sc, s.q.data(), m_.prev_q.data(), s.qd.data(), ref.q.data(),
+                        ref_prev.q.data(), ref.qdot.data(), n, dt_);
   WalkTerms t;
-  t.pose = PoseReward(s.q.data(), ref.q.data(), n, sc.alpha_pose);
-  t.joint_vel = JointVelocityReward(qdot, qdot_ref, n, sc.alpha_vel);
-  t.similarity = sc.w_pose * t.pose + sc.w_vel * t.joint_vel;
+  t.pose = sim.pose;
+  t.joint_vel = sim.joint_vel;
+  t.similarity = sim.total;
 
   if (c_.stage == WalkStage::kForward) {
     const Eigen::Vector3d v =

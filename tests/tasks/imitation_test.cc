@@ -25,6 +25,32 @@ TEST(Imitation, SimilarityMatchesHandComputed) {
   EXPECT_NEAR(SimilarityReward(c, qr, qr, qdr, qdr, 2), 0.55, 1e-12);
 }
 
+TEST(Imitation, SimilarityTermsReadTheVelocitiesTheConfigNames) {
+  const double q[2] = {0.3, -0.2}, q_prev[2] = {0.28, -0.2}, qr[2] = {0.1, 0.0},
+               qr_prev[2] = {0.09, 0.01};
+  const double qd[2] = {1.0, 0.0}, qdr[2] = {0.5, 0.5};
+  const double dt = 0.02;
+  SimilarityRewardConfig c;  // the simulator's velocities
+  SimilarityTerms t = SimilarityTermsAt(c, q, q_prev, qd, qr, qr_prev, qdr, 2, dt);
+  EXPECT_NEAR(t.pose, std::exp(-0.08), 1e-12);
+  EXPECT_NEAR(t.joint_vel, std::exp(-5.0), 1e-12);
+  EXPECT_NEAR(t.total, SimilarityReward(c, q, qr, qd, qdr, 2), 1e-12);
+  // Finite differences: (0.02, 0) / dt = (1, 0) against (0.01, -0.01) / dt = (0.5, -0.5); the
+  // stored velocities are not read (NaN would poison the sum).
+  c.finite_difference_velocities = true;
+  c.alpha_vel = 0.01;
+  const double nan = std::nan("");
+  const double nan2[2] = {nan, nan};
+  t = SimilarityTermsAt(c, q, q_prev, nan2, qr, qr_prev, nan2, 2, dt);
+  EXPECT_NEAR(t.joint_vel, std::exp(-0.01 * (0.25 + 0.25)), 1e-12);
+  EXPECT_NEAR(t.pose, std::exp(-0.08), 1e-12);
+  EXPECT_NEAR(t.total, 0.5 * t.pose + 0.05 * t.joint_vel, 1e-12);
+  // And the previous poses are not read with the simulator's velocities.
+  c.finite_difference_velocities = false;
+  t = SimilarityTermsAt(c, q, nan2, qd, qr, nan2, qdr, 2, dt);
+  EXPECT_TRUE(std::isfinite(t.total));
+}
+
 TEST(Imitation, TaskTermsHaveTheRightSign) {
   // Approaching the target (distance falls) earns more than half the weight; receding, less.
   const double dt = 1.0 / 60;
