@@ -1,7 +1,7 @@
 #include "tasks/imitation.h"
 
 #include <cmath>
-#include <vector>
+#include <stdexcept>
 
 namespace perch {
 
@@ -64,16 +64,17 @@ SimilarityTerms SimilarityTermsAt(const SimilarityRewardConfig& c, const double*
                                   const double* q_prev, const double* qdot, const double* q_ref,
                                   const double* q_ref_prev, const double* qdot_ref, int n,
                                   double dt) {
-  std::vector<double> fd_qdot, fd_qdot_ref;
+  // Stack buffers, not vectors: this runs every control step of every imitation task.
+  constexpr int kMaxJoints = 64;
+  double fd_qdot[kMaxJoints], fd_qdot_ref[kMaxJoints];
   if (c.finite_difference_velocities) {
-    fd_qdot.resize(n);
-    fd_qdot_ref.resize(n);
+    if (n > kMaxJoints) throw std::invalid_argument("SimilarityTermsAt: more than 64 joints");
     for (int j = 0; j < n; ++j) {
       fd_qdot[j] = (q[j] - q_prev[j]) / dt;
       fd_qdot_ref[j] = (q_ref[j] - q_ref_prev[j]) / dt;
     }
-    qdot = fd_qdot.data();
-    qdot_ref = fd_qdot_ref.data();
+    qdot = fd_qdot;
+    qdot_ref = fd_qdot_ref;
   }
   SimilarityTerms t;
   t.pose = PoseReward(q, q_ref, n, c.alpha_pose);
