@@ -27,7 +27,8 @@ std::string SelfExe() {
   return std::string(buf, static_cast<size_t>(n));
 }
 
-pid_t Spawn(const std::vector<std::string>& argv, const std::string& log_path) {
+pid_t Spawn(const std::vector<std::string>& argv, const std::string& log_path,
+            const std::string& stdout_path) {
   std::vector<char*> args;
   for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
   args.push_back(nullptr);
@@ -48,6 +49,13 @@ pid_t Spawn(const std::vector<std::string>& argv, const std::string& log_path) {
       if (fd >= 0) {
         ::dup2(fd, 1);
         ::dup2(fd, 2);
+        ::close(fd);
+      }
+    }
+    if (!stdout_path.empty()) {
+      const int fd = ::open(stdout_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      if (fd >= 0) {
+        ::dup2(fd, 1);
         ::close(fd);
       }
     }

@@ -13,9 +13,11 @@ namespace perch {
 std::string SelfExe();
 
 // fork + exec of argv[0] with argv. stdout/stderr go to `log_path` (appended) unless empty (then
-// inherited). The child gets SIGTERM when the parent dies (PR_SET_PDEATHSIG), so that no
+// inherited); with `stdout_path`, stdout goes there instead (truncated: a command's --json
+// result). The child gets SIGTERM when the parent dies (PR_SET_PDEATHSIG), so that no
 // process outlives the launcher. Throws std::runtime_error when fork fails.
-pid_t Spawn(const std::vector<std::string>& argv, const std::string& log_path = "");
+pid_t Spawn(const std::vector<std::string>& argv, const std::string& log_path = "",
+            const std::string& stdout_path = "");
 
 // Waits for `pid` up to timeout_s. Returns true and sets *status (waitpid form) if it exited.
 bool WaitFor(pid_t pid, double timeout_s, int* status);

@@ -18,5 +18,6 @@ void RegisterViewCommands(CLI::App& root, CLI::App& bench);     // app/cmd_view.
 void RegisterInfoCommands(CLI::App& root, CLI::App& bench);     // app/cmd_info.cc
 void RegisterMetaCommands(CLI::App& root, CLI::App& bench);     // app/cmd_meta.cc
 void RegisterFuzzCommand(CLI::App& root);                       // app/cmd_fuzz.cc
+void RegisterRecipeCommands(CLI::App& root, CLI::App& bench);   // app/cmd_recipe.cc
 
 }  // namespace perch

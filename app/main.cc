@@ -34,6 +34,7 @@ int main(int argc, char** argv) {
   perch::RegisterInfoCommands(app, *bench);
   perch::RegisterMetaCommands(app, *bench);
   perch::RegisterFuzzCommand(app);
+  perch::RegisterRecipeCommands(app, *bench);
   perch::RateLimitProtobufLogs();
   try {
     const std::string data_dir = perch::TakeDataDirFlag(&argc, argv);

@@ -26,8 +26,16 @@ PpoConfig PpoConfig::Meta() {
   return c;
 }
 
+float LearningRateAt(const PpoConfig& c, int64_t samples) {
+  float lr = c.learning_rate;
+  for (const auto& [from, rate] : c.lr_schedule) {
+    if (samples >= from) lr = rate;
+  }
+  return lr;
+}
+
 Json ToJson(const PpoConfig& c) {
-  return Json{{"steps_per_update", c.steps_per_update},
+  Json j{{"steps_per_update", c.steps_per_update},
               {"num_minibatches", c.num_minibatches},
               {"num_epochs", c.num_epochs},
               {"learning_rate", c.learning_rate},
@@ -51,6 +59,13 @@ Json ToJson(const PpoConfig& c) {
               {"vtrace_c_clip", c.vtrace_c_clip},
               {"obs_norm", ToJson(c.obs_norm)},
               {"reward_scaling", ToJson(c.reward_scaling)}};
+  // Written only when set, so that configs without one resolve as they always did.
+  if (!c.lr_schedule.empty()) {
+    Json sched = Json::array();
+    for (const auto& [from, rate] : c.lr_schedule) sched.push_back(Json::array({from, rate}));
+    j["lr_schedule"] = sched;
+  }
+  return j;
 }
 
 PpoConfig PpoConfigFromJson(const Json& j, const std::string& ctx) {
@@ -79,7 +94,8 @@ PpoConfig PpoConfigFromJson(const Json& j, const std::string& ctx) {
                   "vtrace_rho_clip",
                   "vtrace_c_clip",
                   "obs_norm",
-                  "reward_scaling"},
+                  "reward_scaling",
+                  "lr_schedule"},
                  ctx);
   PpoConfig c;
   GetOptional(j, "steps_per_update", c.steps_per_update, ctx);
@@ -104,6 +120,25 @@ PpoConfig PpoConfigFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "vtrace", c.vtrace, ctx);
   GetOptional(j, "vtrace_rho_clip", c.vtrace_rho_clip, ctx);
   GetOptional(j, "vtrace_c_clip", c.vtrace_c_clip, ctx);
+  if (j.contains("lr_schedule")) {
+    const Json& s = j["lr_schedule"];
+    const std::string sctx = ctx + ".lr_schedule";
+    if (!s.is_array()) throw ConfigError(sctx + ": expected [[samples, rate], ...]");
+    int64_t prev = -1;
+    for (size_t i = 0; i < s.size(); ++i) {
+      const std::string ictx = sctx + "[" + std::to_string(i) + "]";
+      if (!s[i].is_array() || s[i].size() != 2 || !s[i][0].is_number_integer() ||
+          !s[i][1].is_number()) {
+        throw ConfigError(ictx + ": expected [samples (integer), rate], got " + s[i].dump());
+      }
+      const int64_t from = s[i][0].get<int64_t>();
+      const double rate = s[i][1].get<double>();
+      if (from <= prev) throw ConfigError(ictx + ": samples must increase, from >= 0");
+      if (!(rate > 0 && rate < 1)) throw ConfigError(ictx + ": rate must be in (0, 1)");
+      prev = from;
+      c.lr_schedule.emplace_back(from, static_cast<float>(rate));
+    }
+  }
   if (j.contains("obs_norm"))
     c.obs_norm = NormalizerConfigFromJson(j["obs_norm"], ctx + ".obs_norm");
   if (j.contains("reward_scaling")) {

@@ -32,7 +32,11 @@ struct PpoConfig {
   int steps_per_update = 8192;  // nsteps: samples per update (the learner waits for this many)
   int num_minibatches = 32;     // minibatch = 256
   int num_epochs = 4;
-  float learning_rate = 1e-4f;  // constant
+  float learning_rate = 1e-4f;  // constant unless lr_schedule says otherwise
+  // Piecewise-constant learning rate by the run's samples (ours, issue 48): from each entry's
+  // samples on, its rate; before the first entry, learning_rate. Empty: constant. Expresses in one
+  // config what walk stage 2 once took five resumed stretches to do (docs/ppo.md).
+  std::vector<std::pair<int64_t, float>> lr_schedule;
   float gamma = 0.99f;
   float gae_lambda = 0.95f;
   float clip_range = 0.2f;
@@ -67,6 +71,8 @@ struct PpoConfig {
   static PpoConfig Meta();     // 64 / 8 / 2 / 1e-4
 };
 Json ToJson(const PpoConfig& c);
+// The learning rate after `samples` samples of the run (lr_schedule, else learning_rate).
+float LearningRateAt(const PpoConfig& c, int64_t samples);
 PpoConfig PpoConfigFromJson(const Json& j, const std::string& ctx);  // strict
 
 // Means over all minibatches of all epochs of one update, except where noted.
@@ -131,6 +137,8 @@ class PpoLearner {
   PpoLearner(const PolicyConfig& policy, const PpoConfig& ppo, uint64_t seed);
 
   const PpoConfig& config() const { return ppo_; }
+  // The rate of the next updates (the service follows ppo.lr_schedule by samples).
+  void SetLearningRate(float lr) { ppo_.learning_rate = lr; }
   const ActorCritic& model() const { return model_; }
   ActorCritic& model() { return model_; }
   ObsNormalizer& obs_normalizer() { return obs_norm_; }

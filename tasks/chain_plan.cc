@@ -33,6 +33,7 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
                   "turn_max_s",
                   "turn_min_s",
                   "calibration_runs",
+                  "calibration_allow_falls",
                   "calibration_seed",
                   "side",
                   "approach_deg",
@@ -64,6 +65,7 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "turn_max_s", c.turn_max_s, ctx);
   GetOptional(j, "turn_min_s", c.turn_min_s, ctx);
   GetOptional(j, "calibration_runs", c.calibration_runs, ctx);
+  GetOptional(j, "calibration_allow_falls", c.calibration_allow_falls, ctx);
   GetOptional(j, "calibration_seed", c.calibration_seed, ctx);
   GetOptional(j, "side", c.side, ctx);
   GetOptional(j, "approach_deg", c.approach_deg, ctx);
@@ -167,7 +169,7 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
 }
 
 Json PlannerConfig::ToJson() const {
-  return Json{{"pass_m", pass_m},
+  Json j{{"pass_m", pass_m},
               {"reach_m", reach_m},
               {"lookahead_m", lookahead_m},
               {"aim_m", aim_m},
@@ -196,6 +198,9 @@ Json PlannerConfig::ToJson() const {
               {"lookahead_straight_s", lookahead_straight_s},
               {"lookahead_rank", lookahead_rank},
               {"lookahead_detour_deg", lookahead_detour_deg}};
+  // Written only when on, so that every other config resolves as before.
+  if (calibration_allow_falls) j["calibration_allow_falls"] = true;
+  return j;
 }
 
 Eigen::Vector2d TurnCalibration::DisplacementAt(double rotation) const {
@@ -278,7 +283,7 @@ Json TurnCalibration::ToJson() const {
 }
 
 TurnCalibration CalibrateTurn(HumanoidChairEnv& env, SubtaskPolicies& policies, int id, int runs,
-                              uint64_t seed, double max_s) {
+                              uint64_t seed, double max_s, bool allow_falls) {
   const int steps = static_cast<int>(std::ceil(max_s / env.spec().control_dt));
   std::vector<float> obs(env.spec().obs_dim), action(21);
   std::vector<double> rot_sum(steps, 0.0);
@@ -311,6 +316,14 @@ TurnCalibration CalibrateTurn(HumanoidChairEnv& env, SubtaskPolicies& policies, 
       d[k] = Rotate(-yaw0, env.humanoid_state().root_pos.head<2>() - xy0);
     }
     c.starts.push_back({features, fell, ran, std::abs(unwrapped)});
+    if (fell && allow_falls) {
+      // Held where it fell (toy runs only, PlannerConfig::calibration_allow_falls).
+      for (int k = ran; k < steps; ++k) {
+        rot[k] = k > 0 ? rot[k - 1] : 0.0;
+        d[k] = k > 0 ? d[k - 1] : Eigen::Vector2d::Zero();
+      }
+      fell = false;
+    }
     if (fell) {
       ++c.fell;
       continue;
@@ -419,7 +432,8 @@ MetaPlan MeasurePlan(HumanoidChairEnv& env, SubtaskPolicies& policies, const Jso
     if (!PlannerTakesTurn(planner, id)) continue;
     task.set_active(id);
     plan.turns[side] = CalibrateTurn(env, policies, id, planner.calibration_runs,
-                                     planner.calibration_seed, planner.turn_max_s);
+                                     planner.calibration_seed, planner.turn_max_s,
+                                     planner.calibration_allow_falls);
   }
   plan.sit_start = SitClipStart(sit_saved, env.config(), "planner: sit policy " + sit_name);
   plan.sit_start.xy += Eigen::Rotation2Dd(env.config().chair_placement.yaw) *

@@ -66,9 +66,10 @@ struct TurnCalibration {
 std::vector<double> TurnStartFeatures(const HumanoidChairEnv& env);
 
 // Runs turn `id` of `policies` for `runs` episodes of `env` (each from the env's own reset, a
-// walking state) for up to max_s seconds, deterministic actions.
+// walking state) for up to max_s seconds, deterministic actions. allow_falls: a run that falls
+// counts, held where it fell (PlannerConfig::calibration_allow_falls).
 TurnCalibration CalibrateTurn(HumanoidChairEnv& env, SubtaskPolicies& policies, int id, int runs,
-                              uint64_t seed, double max_s);
+                              uint64_t seed, double max_s, bool allow_falls = false);
 
 // Where the sit subtask's clip starts on chain_env's chair: its saved experiment config (the one
 // stored with the sit checkpoint), with no start banks and no reference state initialisation.
@@ -85,6 +86,10 @@ struct PlannerConfig {
   double turn_max_s = 3.2;                // turn -> sit at the latest
   double turn_min_s = 0.3;                // ... and not before [s]
   int calibration_runs = 20;
+  // Toy runs (perch recipe run --scale): untrained turns fall in every calibration run; with this
+  // the paths up to each fall stand in for whole turns (held at the fall), so the rest of the
+  // pipeline can be exercised. Never on for a real plan.
+  bool calibration_allow_falls = false;
   uint64_t calibration_seed = 17;
   std::string side = "short";  // "short" (by the heading at the first decision), "left", "right"
   // Approach the turn's start along a line that meets the sit's facing at this angle [deg]

@@ -629,6 +629,9 @@ void LearnerService::Train() {
     pending_obs_delta_.Reset(0.0);
   }
   try {
+    if (!setup_.ppo.lr_schedule.empty()) {
+      ppo_->SetLearningRate(LearningRateAt(setup_.ppo, static_cast<int64_t>(counters_.samples())));
+    }
     u = ppo_->Update(batch_);
     proto::LearnerState after;
     ppo_->ExportState(&after);
@@ -944,6 +947,19 @@ void LearnerService::Run() {
   progress_->OnUpdate(counters_.samples(), MonotonicSeconds());
   spdlog::info("{}", progress_->Summary(counters_.updates(), stop_reason_, last_checkpoint_path_,
                                         train_time_base_s_ + MonotonicSeconds() - start_s_));
+  // Why the run ended, for whoever drives it (perch recipe tells a finished stage from one that
+  // was stopped). Only the group's rank 0 owns the run dir's files.
+  if (options_.group_rank == 0) {
+    try {
+      SaveJsonFileAtomic(options_.run_dir + "/end.json",
+                         Json{{"stop_reason", stop_reason_},
+                              {"updates", counters_.updates()},
+                              {"samples", counters_.samples()},
+                              {"checkpoint", last_checkpoint_path_}});
+    } catch (const std::exception& e) {
+      spdlog::warn("learner: cannot write {}/end.json: {}", options_.run_dir, e.what());
+    }
+  }
   spdlog::info("learner: stopped at update {} ({} samples, {} stale, {} rejected)",
                counters_.updates(), counters_.samples(), counters_.dropped_stale(),
                counters_.rejected());

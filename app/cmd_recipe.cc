@@ -1,0 +1,71 @@
+// perch recipe run / status: a training recipe from an empty directory to a delivered hierarchy
+// (recipe/runner.h, docs/recipe.md).
+#include <signal.h>
+
+#include <atomic>
+#include <iostream>
+#include <memory>
+
+#include "app/commands.h"
+#include "recipe/runner.h"
+
+namespace perch {
+namespace {
+
+std::atomic<bool> g_recipe_stop{false};
+void OnRecipeStop(int) { g_recipe_stop.store(true); }
+
+}  // namespace
+
+void RegisterRecipeCommands(CLI::App& root, CLI::App& /*bench*/) {
+  CLI::App* recipe = root.add_subcommand("recipe", "Training recipes: every stage in one command");
+  recipe->require_subcommand(1);
+
+  auto f = std::make_shared<RecipeRunFlags>();
+  CLI::App* run = recipe->add_subcommand(
+      "run", "Run a recipe's stages in order in --dir; run again to continue after a stop");
+  run->add_option("recipe", f->recipe, "the recipe file (recipes/sit_chair.json)")->required();
+  run->add_option("--dir", f->dir, "the recipe's directory (state file, stages' outputs)")
+      ->required();
+  run->add_option("--actors", f->options.actors, "actor processes per training stage");
+  run->add_option("--from", f->from, "first stage to run (earlier ones must be done)");
+  run->add_option("--until", f->until, "last stage to run");
+  run->add_option("--force-from", f->force_from,
+                  "redo this stage and every later one that ran (their files move to "
+                  "DIR/superseded/): accepts a changed stage");
+  run->add_option("--set", f->options.sets,
+                  "override a field of every stage's config: section.field=VALUE (repeatable)");
+  run->add_option("--scale", f->options.scale,
+                  "multiply every sample budget, episode, trial and state count by F (floors: one "
+                  "update, a few episodes); 0.0001 is a toy run");
+  run->add_option("--parallel", f->parallel, "independent stages run side by side, at most N");
+  run->add_option("--progress-s", f->progress_s, "seconds between progress lines");
+  run->callback([f] {
+    struct sigaction sa {};
+    sa.sa_handler = OnRecipeStop;
+    sigemptyset(&sa.sa_mask);
+    ::sigaction(SIGINT, &sa, nullptr);
+    ::sigaction(SIGTERM, &sa, nullptr);
+    ::signal(SIGPIPE, SIG_IGN);
+    f->stop = &g_recipe_stop;
+    const int code = RunRecipe(*f);
+    if (code != 0) std::exit(code);
+  });
+
+  auto dir = std::make_shared<std::string>();
+  auto json = std::make_shared<bool>(false);
+  CLI::App* status = recipe->add_subcommand(
+      "status", "Each stage's state, samples, wall time, chosen checkpoint and figures");
+  status->add_option("--dir", *dir, "the recipe's directory")->required();
+  status->add_flag("--json", *json, "print one JSON object");
+  status->callback([dir, json] {
+    const Json s = RecipeStatus(*dir);
+    if (*json) {
+      std::cout << s.dump() << "\n";
+    } else {
+      std::cout << RecipeStatusText(s);
+    }
+  });
+}
+
+}  // namespace perch

@@ -1,0 +1,437 @@
+#include "recipe/recipe.h"
+
+#include <openssl/evp.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <filesystem>
+#include <regex>
+#include <set>
+
+#include "common/file_util.h"
+
+namespace perch {
+namespace {
+
+const std::set<std::string>& Kinds() {
+  static const std::set<std::string> k = {"train", "sample", "mirror", "clone", "eval", "run"};
+  return k;
+}
+
+bool ValidName(const std::string& s) {
+  if (s.empty() || s.size() > 64) return false;
+  for (char c : s) {
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-')) return false;
+  }
+  return s != "out" && s != "dir";
+}
+
+StageSelect SelectFromJson(const Json& j, const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
+  CheckKnownKeys(j, {"last_k", "episodes", "seed", "metric", "lower_is_better", "args"}, ctx);
+  StageSelect s;
+  GetOptional(j, "last_k", s.last_k, ctx);
+  GetOptional(j, "episodes", s.episodes, ctx);
+  GetOptional(j, "seed", s.seed, ctx);
+  GetOptional(j, "metric", s.metric, ctx);
+  GetOptional(j, "lower_is_better", s.lower_is_better, ctx);
+  GetOptional(j, "args", s.args, ctx);
+  if (s.last_k < 0 || s.last_k > 50) throw ConfigError(ctx + ".last_k: must be in 0..50");
+  if (s.episodes < 1) throw ConfigError(ctx + ".episodes: must be >= 1");
+  return s;
+}
+
+Json ToJson(const StageSelect& s) {
+  return Json{{"last_k", s.last_k},
+              {"episodes", s.episodes},
+              {"seed", s.seed},
+              {"metric", s.metric},
+              {"lower_is_better", s.lower_is_better},
+              {"args", s.args}};
+}
+
+// Sets are written in the recipe as an object {"section.field": VALUE} (easier to read than
+// "k=v" strings); VALUE is any JSON.
+std::vector<std::string> SetsFromJson(const Json& j, const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected an object {\"section.field\": VALUE}");
+  std::vector<std::string> out;
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    if (it.key().empty()) throw ConfigError(ctx + ": an empty field name");
+    out.push_back(it.key() + "=" + (it->is_string() ? it->get<std::string>() : it->dump()));
+  }
+  return out;
+}
+
+RecipeStage StageFromJson(const Json& j, const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
+  CheckKnownKeys(j, {"name",       "kind",        "command",        "doc",
+                     "config",     "set",         "args",           "counts",
+                     "min_count",  "max_samples", "target_success", "target_window",
+                     "actors",     "select",      "outputs",        "figures",
+                     "est_wall_s", "toy_args",    "toy_set",        "optional_outputs"},
+                 ctx);
+  RecipeStage s;
+  GetRequired(j, "name", s.name, ctx);
+  GetRequired(j, "kind", s.kind, ctx);
+  const std::string c = ctx + " (" + s.name + ")";
+  if (!ValidName(s.name)) {
+    throw ConfigError(c + ".name: letters, digits, '_' or '-', at most 64, not 'out' or 'dir'");
+  }
+  if (!Kinds().count(s.kind)) {
+    throw ConfigError(c + ".kind: \"" + s.kind +
+                      "\" is not one of train, sample, mirror, clone, eval, run");
+  }
+  GetOptional(j, "command", s.command, c);
+  GetOptional(j, "doc", s.doc, c);
+  GetOptional(j, "config", s.config, c);
+  if (j.contains("set")) s.sets = SetsFromJson(j["set"], c + ".set");
+  GetOptional(j, "args", s.args, c);
+  if (j.contains("toy_args")) {
+    GetOptional(j, "toy_args", s.toy_args, c);
+    s.has_toy_args = true;
+  }
+  if (j.contains("toy_set")) s.toy_sets = SetsFromJson(j["toy_set"], c + ".toy_set");
+  GetOptional(j, "counts", s.counts, c);
+  GetOptional(j, "min_count", s.min_count, c);
+  GetOptional(j, "max_samples", s.max_samples, c);
+  GetOptional(j, "target_success", s.target_success, c);
+  GetOptional(j, "target_window", s.target_window, c);
+  GetOptional(j, "actors", s.actors, c);
+  if (j.contains("select")) s.select = SelectFromJson(j["select"], c + ".select");
+  GetOptional(j, "outputs", s.outputs, c);
+  GetOptional(j, "optional_outputs", s.optional_outputs, c);
+  GetOptional(j, "figures", s.figures, c);
+  GetOptional(j, "est_wall_s", s.est_wall_s, c);
+  for (const auto& [flag, n] : s.counts) {
+    if (flag.rfind("--", 0) != 0)
+      throw ConfigError(c + ".counts: \"" + flag + "\" is not a --flag");
+    if (n < 1) throw ConfigError(c + ".counts." + flag + ": must be >= 1");
+  }
+  if (s.min_count < 1) throw ConfigError(c + ".min_count: must be >= 1");
+  if (s.max_samples < 0) throw ConfigError(c + ".max_samples: must be >= 0");
+  if (!(s.target_success >= 0 && s.target_success <= 1)) {
+    throw ConfigError(c + ".target_success: must be in [0, 1]");
+  }
+  if (s.actors < 0 || s.actors > 256) throw ConfigError(c + ".actors: must be in 0..256");
+  if (s.kind == "train") {
+    if (s.config.empty()) throw ConfigError(c + ": a train stage needs \"config\"");
+    if (s.max_samples == 0 && s.target_success == 0) {
+      throw ConfigError(c +
+                        ": a train stage needs a stop rule (max_samples and/or target_success)");
+    }
+    if (s.max_samples == 0) {
+      throw ConfigError(c +
+                        ".max_samples: a train stage needs a budget (target_success alone may "
+                        "never be reached)");
+    }
+    if (!s.command.empty()) throw ConfigError(c + ".command: a train stage runs perch train");
+  } else {
+    if (s.max_samples || s.target_success || s.target_window || s.select.last_k) {
+      throw ConfigError(c +
+                        ": max_samples, target_success, target_window and select are for train "
+                        "stages");
+    }
+    if (s.kind == "run" && s.command.empty()) {
+      throw ConfigError(c + ": a run stage needs \"command\" (a perch subcommand)");
+    }
+  }
+  for (const std::string& o : s.optional_outputs) {
+    if (!s.outputs.count(o))
+      throw ConfigError(c + ".optional_outputs: \"" + o + "\" is not in outputs");
+  }
+  for (const auto& [name, file] : s.outputs) {
+    if (!ValidName(name)) throw ConfigError(c + ".outputs: bad output name \"" + name + "\"");
+    if (file.empty() || file.find('/') != std::string::npos || file[0] == '.') {
+      throw ConfigError(c + ".outputs." + name +
+                        ": a plain file name inside the stage's directory");
+    }
+  }
+  return s;
+}
+
+std::vector<std::string> AllRefStrings(const RecipeStage& s) {
+  std::vector<std::string> all = s.sets;
+  all.insert(all.end(), s.args.begin(), s.args.end());
+  all.insert(all.end(), s.select.args.begin(), s.select.args.end());
+  all.insert(all.end(), s.toy_args.begin(), s.toy_args.end());
+  all.insert(all.end(), s.toy_sets.begin(), s.toy_sets.end());
+  if (!s.config.empty()) all.push_back(s.config);
+  return all;
+}
+
+}  // namespace
+
+int Recipe::Index(const std::string& stage) const {
+  for (size_t i = 0; i < stages.size(); ++i) {
+    if (stages[i].name == stage) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+std::vector<std::pair<std::string, std::string>> FindRefs(const std::string& s) {
+  static const std::regex re(R"(\$\{([A-Za-z0-9_-]+)(?:\.([A-Za-z0-9_-]+))?\})");
+  std::vector<std::pair<std::string, std::string>> out;
+  for (auto it = std::sregex_iterator(s.begin(), s.end(), re); it != std::sregex_iterator(); ++it) {
+    out.emplace_back((*it)[1].str(), (*it)[2].str());
+  }
+  return out;
+}
+
+std::string SubstituteRefs(
+    const std::string& s,
+    const std::function<std::string(const std::string&, const std::string&)>& lookup) {
+  static const std::regex re(R"(\$\{([A-Za-z0-9_-]+)(?:\.([A-Za-z0-9_-]+))?\})");
+  std::string out;
+  auto last = s.cbegin();
+  for (auto it = std::sregex_iterator(s.begin(), s.end(), re); it != std::sregex_iterator(); ++it) {
+    out.append(last, s.cbegin() + it->position());
+    out += lookup((*it)[1].str(), (*it)[2].str());
+    last = s.cbegin() + it->position() + it->length();
+  }
+  out.append(last, s.cend());
+  return out;
+}
+
+std::map<std::string, std::string> StageOutputs(const RecipeStage& s) {
+  std::map<std::string, std::string> o;
+  if (s.kind == "train" || s.kind == "mirror") o["policy"] = "policy.bin";
+  if (s.kind == "clone") {
+    o["policy"] = "policy.bin";
+  }
+  if (s.kind == "sample") o["bank"] = "bank.bin";
+  if (s.kind == "eval") o["result"] = "eval.json";
+  for (const auto& [k, v] : s.outputs) o[k] = v;
+  return o;
+}
+
+std::string StageCommand(const RecipeStage& s) {
+  if (!s.command.empty()) return s.command;
+  if (s.kind == "train") return "train";
+  if (s.kind == "sample") return "sample-end-poses";
+  if (s.kind == "mirror") return "mirror-model";
+  if (s.kind == "clone") return "meta-clone";
+  if (s.kind == "eval") return "eval";
+  return s.command;
+}
+
+Recipe RecipeFromJson(const Json& j, const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected a JSON object");
+  CheckKnownKeys(j, {"name", "doc", "stages"}, ctx);
+  Recipe r;
+  GetRequired(j, "name", r.name, ctx);
+  GetOptional(j, "doc", r.doc, ctx);
+  if (!j.contains("stages") || !j["stages"].is_array() || j["stages"].empty()) {
+    throw ConfigError(ctx + ".stages: expected a non-empty list of stages");
+  }
+  for (size_t i = 0; i < j["stages"].size(); ++i) {
+    r.stages.push_back(StageFromJson(j["stages"][i], ctx + ".stages[" + std::to_string(i) + "]"));
+  }
+  std::map<std::string, int> seen;
+  for (size_t i = 0; i < r.stages.size(); ++i) {
+    RecipeStage& s = r.stages[i];
+    const std::string c = ctx + ": stage " + s.name;
+    if (seen.count(s.name)) throw ConfigError(c + ": the name is used twice");
+    seen[s.name] = static_cast<int>(i);
+    const auto own = StageOutputs(s);
+    std::set<std::string> deps;
+    for (const std::string& str : AllRefStrings(s)) {
+      for (const auto& [a, b] : FindRefs(str)) {
+        if (a == "dir" && b.empty()) continue;
+        if (a == "out") {
+          if (!own.count(b))
+            throw ConfigError(c + ": ${out." + b + "}: the stage has no such output");
+          continue;
+        }
+        if (b.empty()) throw ConfigError(c + ": ${" + a + "}: write ${STAGE.OUTPUT}");
+        if (a == s.name)
+          throw ConfigError(c + ": ${" + a + "." + b + "}: a stage cannot read itself");
+        auto it = seen.find(a);
+        if (it == seen.end()) {
+          throw ConfigError(c + ": ${" + a + "." + b + "}: no earlier stage \"" + a +
+                            "\" (stages run in the order listed)");
+        }
+        if (!StageOutputs(r.stages[it->second]).count(b)) {
+          throw ConfigError(c + ": ${" + a + "." + b + "}: stage " + a + " has no output \"" + b +
+                            "\"");
+        }
+        deps.insert(a);
+      }
+    }
+    for (const RecipeStage& e : r.stages) {
+      if (deps.count(e.name)) s.deps.push_back(e.name);
+    }
+  }
+  return r;
+}
+
+Recipe LoadRecipe(const std::string& path) {
+  Recipe r = RecipeFromJson(LoadJsonFile(path), path);
+  r.path = path;
+  return r;
+}
+
+int64_t ScaledCount(int64_t n, double scale, int64_t floor) {
+  const int64_t v = std::llround(static_cast<double>(n) * scale);
+  return std::min(n, std::max(v, floor));
+}
+
+RecipeStage ScaledStage(const RecipeStage& s, const RecipeRunOptions& o) {
+  RecipeStage r = s;
+  for (auto& [flag, n] : r.counts) n = ScaledCount(n, o.scale, s.min_count);
+  // At least one update: the learner ends its run after the first update past the budget.
+  if (r.max_samples > 0) r.max_samples = ScaledCount(s.max_samples, o.scale, 1);
+  r.select.episodes = static_cast<int>(ScaledCount(s.select.episodes, o.scale, s.min_count));
+  r.est_wall_s = s.est_wall_s * o.scale;
+  if (o.scale < 1.0) {
+    if (s.has_toy_args) r.args = s.toy_args;
+    r.sets.insert(r.sets.end(), s.toy_sets.begin(), s.toy_sets.end());
+  }
+  r.sets.insert(r.sets.end(), o.sets.begin(), o.sets.end());
+  if (r.actors == 0) r.actors = o.actors;
+  return r;
+}
+
+std::string Sha256HexOf(const std::string& bytes) {
+  unsigned char md[EVP_MAX_MD_SIZE];
+  unsigned int len = 0;
+  if (EVP_Digest(bytes.data(), bytes.size(), md, &len, EVP_sha256(), nullptr) != 1) {
+    throw std::runtime_error("SHA-256 failed");
+  }
+  static const char* hex = "0123456789abcdef";
+  std::string out;
+  for (unsigned int i = 0; i < len; ++i) {
+    out += hex[md[i] >> 4];
+    out += hex[md[i] & 15];
+  }
+  return out;
+}
+
+std::string Sha256OfFile(const std::string& path) { return Sha256HexOf(ReadFileBytes(path)); }
+
+std::string StageFingerprint(const RecipeStage& scaled, const Json& composed_config,
+                             const std::map<std::string, std::string>& input_sha256) {
+  Json def{{"kind", scaled.kind},
+           {"command", StageCommand(scaled)},
+           {"args", scaled.args},
+           {"counts", scaled.counts},
+           {"max_samples", scaled.max_samples},
+           {"target_success", scaled.target_success},
+           {"target_window", scaled.target_window},
+           {"select", ToJson(scaled.select)},
+           {"outputs", StageOutputs(scaled)},
+           {"config", composed_config},
+           {"inputs", input_sha256}};
+  // Fields added to the format later enter only when used, so that older runs stay valid.
+  if (!scaled.optional_outputs.empty()) def["optional_outputs"] = scaled.optional_outputs;
+  // Not in it: doc, est_wall_s, figures and actors (how many processes step the envs does not
+  // change what a run means; a resumed stage may use another count).
+  return Sha256HexOf(def.dump());
+}
+
+Json ToJson(const StageRecord& r) {
+  return Json{{"state", r.state},
+              {"fingerprint", r.fingerprint},
+              {"samples", r.samples},
+              {"wall_s", r.wall_s},
+              {"attempts", r.attempts},
+              {"outputs", r.outputs},
+              {"output_sha256", r.output_sha256},
+              {"figures", r.figures},
+              {"error", r.error},
+              {"started_at", r.started_at},
+              {"finished_at", r.finished_at}};
+}
+
+StageRecord StageRecordFromJson(const Json& j, const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
+  CheckKnownKeys(j,
+                 {"state", "fingerprint", "samples", "wall_s", "attempts", "outputs",
+                  "output_sha256", "figures", "error", "started_at", "finished_at"},
+                 ctx);
+  StageRecord r;
+  GetOptional(j, "state", r.state, ctx);
+  GetOptional(j, "fingerprint", r.fingerprint, ctx);
+  GetOptional(j, "samples", r.samples, ctx);
+  GetOptional(j, "wall_s", r.wall_s, ctx);
+  GetOptional(j, "attempts", r.attempts, ctx);
+  GetOptional(j, "outputs", r.outputs, ctx);
+  GetOptional(j, "output_sha256", r.output_sha256, ctx);
+  if (j.contains("figures")) r.figures = j["figures"];
+  GetOptional(j, "error", r.error, ctx);
+  GetOptional(j, "started_at", r.started_at, ctx);
+  GetOptional(j, "finished_at", r.finished_at, ctx);
+  static const std::set<std::string> states = {"pending", "running", "done", "failed"};
+  if (!states.count(r.state)) throw ConfigError(ctx + ".state: \"" + r.state + "\" is not a state");
+  return r;
+}
+
+Json ToJson(const RecipeState& s) {
+  Json stages = Json::object();
+  for (const auto& [k, v] : s.stages) stages[k] = ToJson(v);
+  return Json{{"format", "perch-recipe-state/1"},
+              {"recipe", s.recipe_path},
+              {"name", s.recipe_name},
+              {"scale", s.scale},
+              {"stages", stages}};
+}
+
+RecipeState RecipeStateFromJson(const Json& j, const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected a JSON object");
+  CheckKnownKeys(j, {"format", "recipe", "name", "scale", "stages"}, ctx);
+  std::string format;
+  GetRequired(j, "format", format, ctx);
+  if (format != "perch-recipe-state/1") {
+    throw ConfigError(ctx + ".format: \"" + format + "\" (this build reads perch-recipe-state/1)");
+  }
+  RecipeState s;
+  GetOptional(j, "recipe", s.recipe_path, ctx);
+  GetOptional(j, "name", s.recipe_name, ctx);
+  GetOptional(j, "scale", s.scale, ctx);
+  if (j.contains("stages")) {
+    if (!j["stages"].is_object()) throw ConfigError(ctx + ".stages: expected an object");
+    for (auto it = j["stages"].begin(); it != j["stages"].end(); ++it) {
+      s.stages[it.key()] = StageRecordFromJson(*it, ctx + ".stages." + it.key());
+    }
+  }
+  return s;
+}
+
+std::string StatePath(const std::string& dir) { return dir + "/recipe-state.json"; }
+
+RecipeState LoadRecipeState(const std::string& dir) {
+  const std::string p = StatePath(dir);
+  std::error_code ec;
+  if (!std::filesystem::exists(p, ec)) return RecipeState{};
+  return RecipeStateFromJson(LoadJsonFile(p), p);
+}
+
+void SaveRecipeState(const std::string& dir, const RecipeState& s) {
+  SaveJsonFileAtomic(StatePath(dir), ToJson(s));
+}
+
+std::vector<std::string> InvalidatedStages(const Recipe& r, const RecipeState& s,
+                                           const std::map<std::string, std::string>& fingerprints) {
+  std::set<std::string> bad;
+  std::vector<std::string> out;
+  for (const RecipeStage& st : r.stages) {
+    bool invalid = false;
+    auto rec = s.stages.find(st.name);
+    const bool recorded = rec != s.stages.end() && !rec->second.fingerprint.empty();
+    if (recorded) {
+      auto f = fingerprints.find(st.name);
+      if (f != fingerprints.end() && f->second != rec->second.fingerprint) invalid = true;
+    }
+    for (const std::string& d : st.deps) {
+      if (bad.count(d)) invalid = true;
+    }
+    if (invalid) {
+      bad.insert(st.name);
+      // Only a stage with something recorded has anything to redo.
+      if (rec != s.stages.end() && rec->second.state != "pending") out.push_back(st.name);
+    }
+  }
+  return out;
+}
+
+}  // namespace perch

@@ -1,0 +1,37 @@
+// perch recipe run / status (issue 48): runs a recipe's stages as child `perch` processes in a
+// directory D, records each stage's state, outputs (with SHA-256) and figures in
+// D/recipe-state.json, and resumes where it stopped. docs/recipe.md.
+#pragma once
+
+#include <atomic>
+#include <string>
+
+#include "common/json_util.h"
+#include "recipe/recipe.h"
+
+namespace perch {
+
+struct RecipeRunFlags {
+  std::string recipe;  // the recipe file
+  std::string dir;     // D
+  RecipeRunOptions options;
+  std::string from, until;   // run only these stages (inclusive); earlier ones must be done
+  std::string force_from;    // accept: this stage and every later one that ran are redone
+  int parallel = 1;          // independent stages run side by side
+  double progress_s = 10.0;  // console progress period
+  std::string exe;           // the perch program (default: this one)
+  std::atomic<bool>* stop = nullptr;  // set by a signal: stop children, keep what is saved
+};
+
+// Returns the exit code: 0 all stages in range done, 1 a stage failed (named on stderr with its
+// log's last lines), 130 stopped by a signal. ConfigError for a bad recipe, a changed stage
+// config without --force-from, or outputs that changed on disk.
+int RunRecipe(const RecipeRunFlags& f);
+
+// The status of D: {"name", "dir", "runner_alive", "stages": [{name, kind, state, samples,
+// wall_s, outputs, figures, chosen, error}], "total_samples", "total_wall_s"}. A running stage
+// shows its live sample count.
+Json RecipeStatus(const std::string& dir);
+std::string RecipeStatusText(const Json& status);
+
+}  // namespace perch

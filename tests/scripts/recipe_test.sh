@@ -1,0 +1,158 @@
+#!/usr/bin/env bash
+# The delivered recipe (recipes/sit_chair.json) end to end at toy scale (issue 48), with real
+# processes, real training and real files:
+#  A. a training stage killed (kill -9 of the runner) after its first checkpoint continues from it
+#     with its counters when the same command runs again;
+#  B. the whole recipe at --scale 0.0001, killed inside a training stage and resumed: every stage
+#     ends done, each stage's inputs are the recorded outputs of the stages it names, status reports
+#     every stage; then a changed stage config and a changed output are refused before anything
+#     runs, and --force-from accepts the change.
+# Usage: recipe_test.sh SOURCE_DIR PERCH_BIN
+set -euo pipefail
+src=$(cd "$1" && pwd)
+bin=$2
+tmp=$(mktemp -d /tmp/perch-recipe.XXXXXX)
+trap 'kill -9 $(jobs -p) 2>/dev/null || true; rm -rf "$tmp"' EXIT
+cd "$src"
+fail() { echo "FAIL: $*" >&2; exit 1; }
+state() { python3 -c "import json,sys; d=json.load(open('$1/recipe-state.json')); $2"; }
+
+# Waits until $2 (a python expression on the state `d`) holds for dir $1, up to $3 seconds.
+wait_for() {
+  local t=0
+  until [ -f "$1/recipe-state.json" ] && state "$1" "sys.exit(0 if ($2) else 1)" 2>/dev/null; do
+    sleep 0.2
+    t=$((t + 1))
+    [ $t -lt $(($3 * 5)) ] || fail "timed out waiting for: $2"
+  done
+}
+
+# ---- A: kill -9 inside a training stage after its first checkpoint, resume -------------------
+A=$tmp/a
+argsA=(recipe run recipes/sit_chair.json --dir "$A" --actors 1 --scale 0.002 --until walk1
+  --set cluster.checkpoint_every=1 --progress-s 1)
+"$bin" "${argsA[@]}" >> "$tmp/a.log" 2>&1 &
+pid=$!
+t=0
+until ls "$A"/walk1/run/checkpoints/ckpt-*.bin > /dev/null 2>&1; do
+  sleep 0.1
+  t=$((t + 1))
+  [ $t -lt 600 ] || fail "A: no checkpoint after 60 s"
+done
+kill -9 $pid
+wait $pid 2>/dev/null || true
+sleep 1  # the children end on their parent's death (PR_SET_PDEATHSIG)
+state "$A" "assert d['stages']['walk1']['state']=='running', d['stages']['walk1']"
+first=$(ls "$A"/walk1/run/checkpoints/ckpt-*.bin | head -1)
+"$bin" recipe status --dir "$A" --json | python3 -c "
+import json,sys; s=json.load(sys.stdin)
+w=[x for x in s['stages'] if x['name']=='walk1'][0]
+assert w['state']=='running' and w.get('interrupted'), w
+assert not s['runner_alive'], s" || fail "A: status after the kill"
+"$bin" "${argsA[@]}" >> "$tmp/a.log" 2>&1 || fail "A: the resumed run failed: $(tail -20 "$tmp/a.log")"
+state "$A" "
+w=d['stages']['walk1']
+assert w['state']=='done', w
+assert w['attempts']==2, w
+assert w['samples']>=32000, w   # 0.002 x 16.5 M = 33,000: the budget, counted across both attempts
+assert w['figures']['stop_reason']=='max_samples', w" || fail "A: walk1 after resume"
+grep -q -- "--resume" "$A/walk1/stage.log" || fail "A: the second attempt did not resume"
+grep -q "resum" "$A/walk1/stage.log" || fail "A: the learner did not say it resumed"
+[ -f "$first" ] || true
+
+# ---- B: the whole recipe at toy scale, killed in a training stage, resumed -------------------
+B=$tmp/b
+argsB=(recipe run recipes/sit_chair.json --dir "$B" --actors 1 --scale 0.0001 --progress-s 5)
+"$bin" "${argsB[@]}" >> "$tmp/b.log" 2>&1 &
+pid=$!
+wait_for "$B" "d['stages'].get('walk2',{}).get('state')=='running'" 120
+kill -9 $pid
+wait $pid 2>/dev/null || true
+sleep 1
+"$bin" "${argsB[@]}" >> "$tmp/b.log" 2>&1 || fail "B: the resumed recipe failed: $(tail -30 "$tmp/b.log")"
+"$bin" recipe status --dir "$B" --json > "$tmp/status.json"
+python3 - "$B" "$tmp/status.json" "$src/recipes/sit_chair.json" << 'PY' || fail "B: checks"
+import hashlib, json, os, re, sys
+d, status_file, recipe_file = sys.argv[1:]
+state = json.load(open(os.path.join(d, "recipe-state.json")))
+status = json.load(open(status_file))
+recipe = json.load(open(recipe_file))
+names = [s["name"] for s in recipe["stages"]]
+# Status reports every stage, in the recipe's order, all done, with the JSON the issue names.
+assert [s["name"] for s in status["stages"]] == names, "status lists the stages in order"
+for s in status["stages"]:
+    assert s["state"] == "done", s
+    for k in ("samples", "wall_s", "outputs", "figures"):
+        assert k in s, (s["name"], k)
+assert status["total_samples"] == sum(s["samples"] for s in status["stages"])
+assert status["total_wall_s"] > 0
+assert state["stages"]["walk2"]["attempts"] == 2, state["stages"]["walk2"]
+# Every recorded output is there with its SHA-256.
+for n, rec in state["stages"].items():
+    for o, rel in rec["outputs"].items():
+        p = os.path.join(d, rel)
+        assert hashlib.sha256(open(p, "rb").read()).hexdigest() == rec["output_sha256"][o], p
+# Each reference ${stage.output} in a stage reached it as that stage's recorded file.
+ref = re.compile(r"\$\{([A-Za-z0-9_-]+)\.([A-Za-z0-9_-]+)\}")
+checked = 0
+for s in recipe["stages"]:
+    log = open(os.path.join(d, s["name"], "stage.log")).read()
+    cfg_path = os.path.join(d, s["name"], "config.json")
+    cfg = open(cfg_path).read() if os.path.exists(cfg_path) else ""
+    refs = set()
+    # At toy scale toy_args stand in for args (docs/recipe.md).
+    args = s["toy_args"] if "toy_args" in s else s.get("args", [])
+    for v in list(s.get("set", {}).values()) + list(s.get("toy_set", {}).values()) + args + \
+            s.get("select", {}).get("args", []):
+        refs |= set(ref.findall(json.dumps(v)))
+    for a, b in refs:
+        if a in ("out",):
+            continue
+        rec = state["stages"][a]
+        if b not in rec["outputs"]:
+            continue  # an optional output the toy did not write
+        path = os.path.join(d, rec["outputs"][b])
+        assert path in log or path in cfg, (s["name"], a, b, path)
+        checked += 1
+assert checked >= 40, checked
+# Training stages chose a checkpoint and delivered exactly it.
+for s in recipe["stages"]:
+    if s["kind"] == "train":
+        f = state["stages"][s["name"]]["figures"]
+        chosen = os.path.join(d, s["name"], "run", "checkpoints", f["chosen"])
+        assert open(chosen, "rb").read() == open(os.path.join(d, s["name"], "policy.bin"), "rb").read()
+print("B: %d stages done, %d references checked" % (len(names), checked))
+PY
+
+# A changed stage config is refused before anything runs, naming the stage and what follows it.
+python3 - "$src/recipes/sit_chair.json" "$tmp/changed.json" << 'PY'
+import json, sys
+r = json.load(open(sys.argv[1]))
+for s in r["stages"]:
+    if s["name"] == "sit_final":
+        s["set"]["ppo.learning_rate"] = 5e-6
+json.dump(r, open(sys.argv[2], "w"))
+PY
+before=$(stat -c %Y "$B/recipe-state.json")
+if "$bin" recipe run "$tmp/changed.json" --dir "$B" --actors 1 --scale 0.0001 > "$tmp/c.log" 2>&1; then
+  fail "a changed stage ran without --force-from"
+fi
+grep -q "stage sit_final changed" "$tmp/c.log" || fail "the refusal does not name sit_final: $(cat "$tmp/c.log")"
+grep -q "eval_meta_zone1_lookahead" "$tmp/c.log" || fail "the refusal does not list the later stages"
+[ "$(stat -c %Y "$B/recipe-state.json")" = "$before" ] || fail "the refused run wrote the state"
+# A changed output is refused too.
+cp "$B/eval_meta_zone3/eval.json" "$tmp/keep.json"
+echo " " >> "$B/eval_meta_zone3/eval.json"
+if "$bin" recipe run recipes/sit_chair.json --dir "$B" --actors 1 --scale 0.0001 > "$tmp/o.log" 2>&1; then
+  fail "a changed output was accepted"
+fi
+grep -q "eval_meta_zone3: output result" "$tmp/o.log" || fail "the refusal does not name the output: $(cat "$tmp/o.log")"
+# --force-from redoes that stage (and only what follows it), moving its old files aside.
+"$bin" recipe run recipes/sit_chair.json --dir "$B" --actors 1 --scale 0.0001 \
+  --force-from eval_meta_zone3 > "$tmp/f.log" 2>&1 || fail "--force-from: $(tail -20 "$tmp/f.log")"
+ls "$B"/superseded/*/eval_meta_zone3/eval.json > /dev/null || fail "the old files were not kept"
+state "$B" "
+assert d['stages']['eval_meta_zone3']['attempts']==1
+assert d['stages']['walk1']['attempts']==1
+assert all(s['state']=='done' for s in d['stages'].values())" || fail "after --force-from"
+echo "recipe_test: OK"
