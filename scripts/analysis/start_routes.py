@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Can the lookahead's start route be learned? (docs/meta.md "Stop 42")
+"""Can the lookahead's start route be learned? (docs/journal/meta.md "Stop 42")
 
 Reads records of `perch eval --task sit_chair ... --record-routes` (each trial: the start
 observation and the outcome of every start route the lookahead tried, the policy's own first)
