@@ -212,6 +212,15 @@ bool ActorService::PollWeights(int timeout_ms) {
     return false;
   }
   const proto::Weights& w = m.weights();
+  // An actor built from the learner's config follows it: another config, or another run (whose
+  // config may have gone by before this actor reconnected), means fetching it anew.
+  if (options_.end_on_new_config &&
+      ((!w.experiment_config_json().empty() && w.experiment_config_json() != setup_.config_json) ||
+       (have_weights_ && w.run_id() != weights_run_id_))) {
+    spdlog::info("actor {}: the learner's experiment changed; rebuilding", options_.actor_id);
+    config_changed_ = true;
+    return false;
+  }
   TakeFrozen(w);
   if (have_weights_ && w.run_id() == weights_run_id_ && w.version() == runner_.version()) {
     // Same weights: a republish for someone else, or a fresh credit grant for this version.
@@ -225,6 +234,7 @@ bool ActorService::PollWeights(int timeout_ms) {
     } catch (const ConfigError& e) {
       ++counters_.weights_rejected;
       spdlog::error("actor {}: weights do not fit this actor: {}", options_.actor_id, e.what());
+      config_changed_ = options_.end_on_new_config;  // another experiment's: fetch it
       return false;
     }
     if (have_weights_ && w.run_id() != weights_run_id_) {
@@ -246,6 +256,7 @@ bool ActorService::PollWeights(int timeout_ms) {
   }
   ++counters_.weights_rejected;
   spdlog::error("actor {}: weights hold no policy for task {}", options_.actor_id, TaskName(task_));
+  config_changed_ = options_.end_on_new_config;  // another experiment's: fetch it
   return false;
 }
 
@@ -292,6 +303,44 @@ void ActorService::Produce(size_t i, PolicyRunner* runner, Rollout* out, Episode
       MaybeHeartbeat();
     }
   }
+}
+
+bool FetchLearnerExperiment(zmq::context_t& ctx, const std::string& weights_connect,
+                            const ClusterConfig& cluster, const std::atomic<bool>* stop,
+                            LearnerExperiment* out) {
+  zmq::socket_t sub(ctx, zmq::socket_type::sub);
+  sub.set(zmq::sockopt::reconnect_ivl, cluster.reconnect_ivl_ms);
+  sub.set(zmq::sockopt::maxmsgsize, static_cast<int64_t>(cluster.max_message_bytes));
+  sub.set(zmq::sockopt::subscribe, "");
+  sub.set(zmq::sockopt::linger, 0);
+  if (!cluster.insecure && NeedsCurve(weights_connect)) {
+    MakeCurveClient(sub, ReadActorKeys(KeysDir(cluster)));
+  }
+  sub.connect(weights_connect);
+  zmq::pollitem_t item{sub.handle(), 0, ZMQ_POLLIN, 0};
+  while (!(stop && stop->load())) {
+    try {
+      if (zmq::poll(&item, 1, std::chrono::milliseconds(200)) <= 0) continue;
+    } catch (const zmq::error_t& e) {
+      if (e.num() != EINTR) throw;
+      continue;
+    }
+    zmq::message_t msg;
+    while (sub.recv(msg, zmq::recv_flags::dontwait)) {
+      proto::LearnerMessage m;
+      std::string why;
+      if (ParseLearnerMessage(msg.data(), msg.size(), cluster.max_message_bytes, &m, &why) !=
+          WireReject::kOk) {
+        spdlog::warn("actor: dropped a weights message: {}", why);
+        continue;
+      }
+      if (m.weights().experiment_config_json().empty()) continue;
+      out->config_json = m.weights().experiment_config_json();
+      out->files.assign(m.weights().config_files().begin(), m.weights().config_files().end());
+      return true;
+    }
+  }
+  return false;
 }
 
 void ActorService::Run() {

@@ -28,6 +28,9 @@ struct ActorSetup {
   NormalizerConfig obs_norm;
   ClusterConfig cluster;
   std::function<std::unique_ptr<Env>()> make_env;
+  // The learner's resolved experiment config this setup was built from, verbatim (an actor
+  // started without --config); "" otherwise.
+  std::string config_json;
 };
 
 // A segment recorded from a real env, for actors that replay instead of stepping (bench scale).
@@ -51,6 +54,9 @@ struct ActorOptions {
   // Hello, heartbeats, credit and weights run exactly as for a real actor.
   const std::vector<RecordedSegment>* replay = nullptr;
   double replay_samples_per_s = 0.0;  // 0: as fast as credit allows
+  // An actor started without --config: Run() returns when the learner publishes another
+  // experiment config than setup.config_json (a recipe's next stage), to be rebuilt from it.
+  bool end_on_new_config = false;
   EnvSpec replay_spec;                // what Hello reports
 };
 
@@ -67,6 +73,19 @@ struct ActorCounters {
   uint64_t weights_bytes = 0;     // their bytes
 };
 
+// The learner's experiment as it publishes it with its weights (wire.proto Weights): what an
+// actor started without --config builds its envs from.
+struct LearnerExperiment {
+  std::string config_json;
+  std::vector<proto::ConfigFile> files;
+};
+// Subscribes to weights_connect (with the cluster's keys, as ActorService does) and waits for
+// the first weights message that carries an experiment config. False when stopped first;
+// messages that fail the wire checks are skipped.
+bool FetchLearnerExperiment(zmq::context_t& ctx, const std::string& weights_connect,
+                            const ClusterConfig& cluster, const std::atomic<bool>* stop,
+                            LearnerExperiment* out);
+
 class ActorService {
  public:
   ActorService(zmq::context_t& ctx, const ActorSetup& setup, const ActorOptions& options);
@@ -76,9 +95,11 @@ class ActorService {
   void Run();
   const ActorCounters& counters() const { return counters_; }
   uint64_t weights_version() const { return runner_.version(); }
+  // Run() returned because the learner's experiment changed (options.end_on_new_config).
+  bool config_changed() const { return config_changed_; }
 
  private:
-  bool Stopping() const { return options_.stop && options_.stop->load(); }
+  bool Stopping() const { return config_changed_ || (options_.stop && options_.stop->load()); }
   // Applies the newest weights waiting on the socket; blocks up to timeout_ms for one.
   bool PollWeights(int timeout_ms);
   bool Send(const std::string& bytes);  // false when stopped before it could be queued
@@ -103,6 +124,7 @@ class ActorService {
   PolicyRunner runner_;
   uint64_t weights_run_id_ = 0;
   bool have_weights_ = false;
+  bool config_changed_ = false;
   double credit_segments_ = 0.0;  // granted per weights version; 0: no limit
   uint64_t credit_epoch_ = 0;
   double credit_carry_ = 0.0;      // fraction carried into the next version, in [0, 1)

@@ -31,6 +31,7 @@
 #include "learner/policy.h"
 #include "learner/rollout.h"
 #include "learner/service/checkpoint.h"
+#include "learner/service/config_files.h"
 #include "learner/service/learner.h"
 #include "learner/service/run_summary.h"
 #include "learner/service/security.h"
@@ -226,6 +227,57 @@ struct ActorFlags {
   bool check_config = false;
 };
 
+// An actor without --config (a recipe on a cluster, issue 48): it builds its envs from the
+// experiment the learner publishes with its weights, and rebuilds when that changes (the
+// recipe's next stage). It needs no files: those the config names come with it.
+int RunActorFromLearner(const ActorFlags& f, ActorOptions o) {
+  if (!f.sets.empty()) {
+    throw ConfigError("--set: needs --config (without one the learner's experiment is used as is)");
+  }
+  const ClusterConfig cluster;  // keys from PERCH_KEYS_DIR; message limits until the config
+  o.actor_id = f.actor_id >= 0 ? static_cast<uint32_t>(f.actor_id) : HostnameHash();
+  o.max_segments = f.max_segments;
+  o.alive_file = f.alive_file;
+  o.end_on_new_config = true;
+  if (f.check_config) {
+    std::cerr << "perch actor: flags OK (the experiment comes from the learner)\n";
+    return 0;
+  }
+  LogToStderr("actor " + std::to_string(o.actor_id));
+  InstallStopHandlers();
+  o.stop = &g_stop;
+  const char* tmp = std::getenv("TMPDIR");
+  const std::string cache = std::string(tmp ? tmp : "/tmp") + "/perch-actor-" +
+                            std::to_string(::getpid()) + "-files";
+  zmq::context_t ctx(1);
+  while (!g_stop.load()) {
+    spdlog::info("actor {}: waiting for the learner's experiment on {}", o.actor_id,
+                 o.weights_connect);
+    LearnerExperiment ex;
+    if (!FetchLearnerExperiment(ctx, o.weights_connect, cluster, &g_stop, &ex)) break;
+    ExperimentConfig cfg;
+    try {
+      Json j = Json::parse(ex.config_json);
+      j = LocalizeConfigFiles(j, ex.files, cache);
+      cfg = ExperimentConfigFromJson(j, "the learner's experiment config");
+    } catch (const std::exception& e) {
+      // A learner of another build, say: keep waiting for one this actor can serve.
+      spdlog::error("actor {}: cannot build the learner's experiment: {}", o.actor_id, e.what());
+      std::this_thread::sleep_for(std::chrono::seconds(5));
+      continue;
+    }
+    ActorSetup setup = MakeActorSetup(cfg);
+    setup.config_json = ex.config_json;
+    o.num_envs = f.envs > 0 ? f.envs : cfg.cluster.envs_per_actor;
+    spdlog::info("actor {}: experiment task {} ({} files from the learner), {} envs", o.actor_id,
+                 cfg.cluster.task, ex.files.size(), o.num_envs);
+    ActorService actor(ctx, setup, o);
+    actor.Run();
+    if (!actor.config_changed()) break;
+  }
+  return 0;
+}
+
 int RunActor(const ActorFlags& f) {
   CheckPort(f.rollout_port, "--rollout-port");
   CheckPort(f.weights_port, "--weights-port");
@@ -244,6 +296,7 @@ int RunActor(const ActorFlags& f) {
   if (f.actor_id < -1 || f.actor_id > 0x7fffffff) throw ConfigError("--actor-id: out of range");
   if (f.envs < 0 || f.envs > 1024) throw ConfigError("--envs: must be in 1..1024");
   if (f.max_segments < 0) throw ConfigError("--max-segments: must be >= 0");
+  if (f.config.empty()) return RunActorFromLearner(f, o);
   const ExperimentConfig cfg = LoadExperimentConfig(f.config, f.sets);
   const ActorSetup setup = MakeActorSetup(cfg);
   o.actor_id = f.actor_id >= 0 ? static_cast<uint32_t>(f.actor_id) : HostnameHash();
@@ -1432,7 +1485,9 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   // perch actor
   auto af = std::make_shared<ActorFlags>();
   CLI::App* a = root.add_subcommand("actor", "Run an actor: step envs, ship rollouts");
-  a->add_option("--config", af->config, "experiment config (JSON)")->required();
+  a->add_option("--config", af->config,
+                 "experiment config (JSON); without it the actor builds what the learner publishes "
+                 "and follows it from stage to stage (perch recipe run --cluster)");
   a->add_option("--learner-host", af->learner_host, "host name or address of the learner");
   a->add_option("--rollout-port", af->rollout_port, "learner rollout port");
   a->add_option("--weights-port", af->weights_port, "learner weights port");

@@ -40,6 +40,16 @@ void RegisterRecipeCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "update, a few episodes); 0.0001 is a toy run");
   run->add_option("--parallel", f->parallel, "independent stages run side by side, at most N");
   run->add_option("--progress-s", f->progress_s, "seconds between progress lines");
+  run->add_flag("--cluster", f->cluster,
+                "training stages run `perch learner` on --bind:5555/5556 (metrics :9100); actors "
+                "elsewhere join each stage with `perch actor --learner-host H` and no config; "
+                "--actors local ones join too (k8s/recipe.yaml)");
+  run->add_option("--bind", f->bind, "--cluster: the learner's interface");
+  run->add_option("--rollout-port", f->rollout_port, "--cluster: rollout port");
+  run->add_option("--weights-port", f->weights_port, "--cluster: weights port");
+  run->add_option("--metrics-port", f->metrics_port, "--cluster: Prometheus port");
+  run->add_flag("--check-config", f->check,
+                "read the recipe and the state, say what would run, and exit (manifest checks)");
   run->callback([f] {
     struct sigaction sa {};
     sa.sa_handler = OnRecipeStop;

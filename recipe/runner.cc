@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <memory>
 #include <mutex>
 #include <set>
 #include <sstream>
@@ -309,18 +310,49 @@ void Runner::Train(const RecipeStage& s, Live* live, StageRecord* rec) {
   const bool resume = !Checkpoints(run).empty();
   std::error_code ec;
   fs::remove(run + "/end.json", ec);
-  std::vector<std::string> argv = {exe_,        "train", "--config", cfg_path,
-                                   "--run-dir", run,     "--actors", std::to_string(s.actors)};
-  argv.insert(argv.end(),
-              {"--rollout-port", std::to_string(PickFreePort()), "--weights-port",
-               std::to_string(PickFreePort()), "--metrics-port", std::to_string(PickFreePort())});
+  std::vector<std::string> argv;
+  if (f_.cluster) {
+    const std::string b = "tcp://" + f_.bind + ":";
+    argv = {exe_,
+            "learner",
+            "--config",
+            cfg_path,
+            "--run-dir",
+            run,
+            "--rollout-bind",
+            b + std::to_string(f_.rollout_port),
+            "--weights-bind",
+            b + std::to_string(f_.weights_port),
+            "--metrics-bind",
+            f_.bind,
+            "--metrics-port",
+            std::to_string(f_.metrics_port)};
+  } else {
+    argv = {exe_,        "train", "--config", cfg_path,
+            "--run-dir", run,     "--actors", std::to_string(s.actors)};
+    argv.insert(argv.end(),
+                {"--rollout-port", std::to_string(PickFreePort()), "--weights-port",
+                 std::to_string(PickFreePort()), "--metrics-port", std::to_string(PickFreePort())});
+  }
   if (resume) argv.push_back("--resume");
   {
     std::lock_guard<std::mutex> g(mu_);
     live->phase = resume ? "training (resumed from its newest checkpoint)" : "training";
   }
   int status = 0;
-  if (!RunChild(argv, log, "", live, run, &status)) {
+  // On a cluster, local actors (if any) join the learner as remote ones do: without a config.
+  std::vector<pid_t> local;
+  if (f_.cluster) {
+    for (int i = 0; i < s.actors; ++i) {
+      local.push_back(Spawn({exe_, "actor", "--learner-host", "127.0.0.1", "--rollout-port",
+                             std::to_string(f_.rollout_port), "--weights-port",
+                             std::to_string(f_.weights_port), "--actor-id", std::to_string(i)},
+                            sd + "/actor-" + std::to_string(i) + ".log"));
+    }
+  }
+  const bool ran = RunChild(argv, log, "", live, run, &status);
+  for (pid_t p : local) Stop(p, 5.0);
+  if (!ran) {
     live->code = 130;
     return;
   }
@@ -578,12 +610,17 @@ void Runner::Progress() {
 
 int Runner::Run() {
   std::error_code ec;
-  fs::create_directories(dir_, ec);
-  if (ec) throw ConfigError(dir_ + ": cannot create: " + ec.message());
-  DirLock lock(dir_);
+  std::unique_ptr<DirLock> lock;
+  if (!f_.check) {
+    fs::create_directories(dir_, ec);
+    if (ec) throw ConfigError(dir_ + ": cannot create: " + ec.message());
+    lock = std::make_unique<DirLock>(dir_);
+  }
   state_ = LoadRecipeState(dir_);
-  // The recipe as run, beside its state (status reads it; a copy is not a path into a checkout).
-  WriteFileAtomic(dir_ + "/recipe.json", LoadJsonFile(r_.path).dump(2) + "\n");
+  if (!f_.check) {
+    // The recipe as run, beside its state (status reads it; a copy is not a path into a checkout).
+    WriteFileAtomic(dir_ + "/recipe.json", LoadJsonFile(r_.path).dump(2) + "\n");
+  }
 
   // 1. What was recorded still holds: every done stage's outputs are there, unchanged.
   for (const RecipeStage& s : r_.stages) {
@@ -641,7 +678,7 @@ int Runner::Run() {
       if (it != state_.stages.end() && it->second.state != "pending") redo.push_back(it->first);
     }
   }
-  if (!redo.empty()) {
+  if (!redo.empty() && !f_.check) {
     const std::string old = dir_ + "/superseded/" + UtcStamp();
     fs::create_directories(old, ec);
     for (const std::string& n : redo) {
@@ -671,6 +708,15 @@ int Runner::Run() {
   for (const RecipeStage& s : r_.stages) {
     StageRecord& rec = state_.stages[s.name];
     (void)rec;
+  }
+  if (f_.check) {
+    int done = 0;
+    for (const RecipeStage& s : r_.stages) done += state_.stages[s.name].state == "done";
+    std::cerr << "perch recipe: " << r_.path << " OK: " << r_.stages.size() << " stages, " << done
+              << " done in " << dir_ << "; would run " << r_.stages[from].name << " .. "
+              << r_.stages[until].name << (redo.empty() ? "" : " (redoing some: --force-from)")
+              << "\n";
+    return 0;
   }
   Save();
   std::cerr << "[recipe] " << r_.name << " in " << dir_ << " (scale " << f_.options.scale
@@ -785,9 +831,16 @@ int RunRecipe(const RecipeRunFlags& f) {
     throw ConfigError("--scale: must be in (0, 1]");
   }
   if (f.parallel < 1 || f.parallel > 16) throw ConfigError("--parallel: must be in 1..16");
-  if (f.options.actors < 1) throw ConfigError("--actors: must be >= 1");
+  if (f.options.actors < (f.cluster ? 0 : 1)) {
+    throw ConfigError(f.cluster ? "--actors: must be >= 0"
+                                : "--actors: must be >= 1 (0 with --cluster)");
+  }
+  if (f.cluster && f.parallel > 1) {
+    throw ConfigError("--parallel: one stage at a time with --cluster (one learner address)");
+  }
   if (f.dir.empty()) throw ConfigError("--dir: required");
-  Runner r(f, LoadRecipe(f.recipe));
+  // recipes/... is found in the data root too (an installed binary, a pod).
+  Runner r(f, LoadRecipe(ResolveProjectPath(f.recipe)));
   return r.Run();
 }
 

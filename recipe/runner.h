@@ -20,6 +20,13 @@ struct RecipeRunFlags {
   int parallel = 1;          // independent stages run side by side
   double progress_s = 10.0;  // console progress period
   std::string exe;           // the perch program (default: this one)
+  // A cluster (k8s/recipe.yaml): each training stage runs `perch learner` on these addresses
+  // (actors elsewhere follow it without files: `perch actor` without --config) plus
+  // options.actors local actors of the same kind; keys from PERCH_KEYS_DIR.
+  bool cluster = false;
+  bool check = false;  // validate the recipe and D's state, print the plan, run nothing
+  std::string bind = "0.0.0.0";
+  int rollout_port = 5555, weights_port = 5556, metrics_port = 9100;
   std::atomic<bool>* stop = nullptr;  // set by a signal: stop children, keep what is saved
 };
 

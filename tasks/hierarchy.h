@@ -55,7 +55,7 @@ struct MetaConfig {
   // Ours (2026-12-06, default 0: the paper switches at once): for this many control steps after a
   // switch the humanoid gets a cross-fade of the previous subtask's action and the new one's (the
   // new one's weight k / (blend_steps + 1) at the k-th step), since a sit's outcome is decided in
-  // its first control steps (docs/meta.md "Stop 43").
+  // its first control steps (docs/journal/meta.md "Stop 43").
   int blend_steps = 0;
   // The scripted planner that teaches this meta (perch meta-clone) and its evaluation row
   // (perch eval --planner); tasks/meta_expert.h.

@@ -51,7 +51,7 @@ struct MetaTrialRecord {
   std::string build;
   // With MetaEvalOptions::record_routes: the meta observation at the start [obs_dim] and the
   // outcome of each start route the lookahead tried (LookaheadPlanner::Stats::routes), for
-  // learning the start route (docs/meta.md "Stop 42"). Empty otherwise.
+  // learning the start route (docs/journal/meta.md "Stop 42"). Empty otherwise.
   struct Route {
     int straight_steps = 0;  // [meta steps]; 0: the policy's own start
     double detour_deg = 0;   // [deg] off the facing; NaN: straight ahead

@@ -86,7 +86,7 @@ class LookaheadPlanner {
     LookaheadOutcome rules;
     // A meta policy's start routes (its first step, with straight-on starts): each one's outcome,
     // in the order tried (the policy's own first, straight_steps 0). For learning which start
-    // to take without the simulator (docs/meta.md "Stop 42").
+    // to take without the simulator (docs/journal/meta.md "Stop 42").
     struct Route {
       int straight_steps = 0;  // [meta steps] walked straight on before the policy steers
       double detour_deg = 0;   // off the facing at the start [deg] (NaN: straight ahead)

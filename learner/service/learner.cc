@@ -13,6 +13,7 @@
 #include <numeric>
 
 #include "common/paths.h"
+#include "learner/service/config_files.h"
 #include "common/proto/model.pb.h"
 #include "learner/dense_kernels.h"
 
@@ -167,6 +168,9 @@ LearnerService::LearnerService(zmq::context_t& ctx, const LearnerSetup& setup,
   const std::string config_path = options_.run_dir + "/config.json";
   if (!resumed_from_.empty()) KeepChangedConfig(config_path, record, counters_.updates());
   SaveJsonFileAtomic(config_path, record);
+  // What an actor without a config of its own builds from (half the message limit for files).
+  config_json_ = record.dump();
+  config_files_ = CollectConfigFiles(record, limits_.max_message_bytes / 2);
 
   // Bigger messages make ZeroMQ drop the sender's connection before they are read into memory.
   rollout_sock_.set(zmq::sockopt::maxmsgsize, static_cast<int64_t>(limits_.max_message_bytes));
@@ -457,6 +461,7 @@ void LearnerService::Publish(bool republish) {
   // Frozen policies go once to everyone, then to each (re)subscription: new actors need them,
   // the others keep what they have.
   const bool with_frozen = !frozen_.empty() && (republish || !frozen_published_);
+  const bool with_config = republish || !config_published_;
   if (!republish || weights_bytes_.empty()) {
     proto::LearnerMessage m;
     m.set_wire_version(proto::WIRE_VERSION_CURRENT);
@@ -470,12 +475,17 @@ void LearnerService::Publish(bool republish) {
     ppo_->ExportWeights(tp->mutable_model());
     weights_bytes_ = m.SerializeAsString();
   }
-  if (with_frozen) {
+  if (with_frozen || with_config) {
     proto::LearnerMessage m;
     m.ParseFromString(weights_bytes_);
-    for (const proto::TaskPolicy& f : frozen_) *m.mutable_weights()->add_policies() = f;
+    if (with_frozen) {
+      for (const proto::TaskPolicy& f : frozen_) *m.mutable_weights()->add_policies() = f;
+      frozen_published_ = true;
+    }
+    m.mutable_weights()->set_experiment_config_json(config_json_);
+    for (const proto::ConfigFile& f : config_files_) *m.mutable_weights()->add_config_files() = f;
+    config_published_ = true;
     weights_sock_.send(zmq::buffer(m.SerializeAsString()), zmq::send_flags::dontwait);
-    frozen_published_ = true;
   } else {
     weights_sock_.send(zmq::buffer(weights_bytes_), zmq::send_flags::dontwait);
   }

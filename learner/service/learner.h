@@ -134,6 +134,11 @@ class LearnerService {
   proto::Task task_;
   std::vector<proto::TaskPolicy> frozen_;  // setup.frozen, or the resumed checkpoint's
   bool frozen_published_ = false;
+  // The experiment config and the files it names, for actors started without one
+  // (wire.proto Weights.experiment_config_json): with the first weights and every republish.
+  std::string config_json_;
+  std::vector<proto::ConfigFile> config_files_;
+  bool config_published_ = false;
   WireLimits limits_;
   std::unique_ptr<PpoLearner> ppo_;
   CheckpointStore store_;

@@ -4,7 +4,7 @@
 Usage: failures.py A.records.jsonl [B.records.jsonl ...]
 
 Groups every failed trial by its subtask sequence and whether it fell (the grouping of
-docs/meta.md, stops 44-46):
+docs/journal/meta.md, stops 44-46):
   time out                      did not fall, never sat for 3 s
   fall walking before any turn  fell while walking, no turn in the sequence
   fall walking after hand-back  fell while walking after a turn handed control back

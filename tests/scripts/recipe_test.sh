@@ -10,7 +10,7 @@
 # Usage: recipe_test.sh SOURCE_DIR PERCH_BIN
 set -euo pipefail
 src=$(cd "$1" && pwd)
-bin=$2
+bin=$(realpath "$2")
 tmp=$(mktemp -d /tmp/perch-recipe.XXXXXX)
 trap 'kill -9 $(jobs -p) 2>/dev/null || true; rm -rf "$tmp"' EXIT
 cd "$src"
@@ -155,4 +155,33 @@ state "$B" "
 assert d['stages']['eval_meta_zone3']['attempts']==1
 assert d['stages']['walk1']['attempts']==1
 assert all(s['state']=='done' for s in d['stages'].values())" || fail "after --force-from"
+
+# ---- C: on a cluster: learners per stage, one long-lived actor without config or files --------
+C=$tmp/c
+"$bin" keygen --out "$tmp/keys" > /dev/null
+export PERCH_KEYS_DIR=$tmp/keys
+base=$((20000 + RANDOM % 20000))
+ports=(--rollout-port $base --weights-port $((base + 1)))
+mkdir -p "$tmp/actor-cwd"
+# The actor runs elsewhere (another directory) and knows nothing of the recipe or its files.
+(cd "$tmp/actor-cwd" && exec "$bin" actor --learner-host 127.0.0.1 "${ports[@]}" --actor-id 7 \
+  > "$tmp/actor.log" 2>&1) &
+actor=$!
+"$bin" recipe run recipes/sit_chair.json --dir "$C" --cluster --actors 0 --bind 127.0.0.1 \
+  "${ports[@]}" --metrics-port $((base + 2)) --scale 0.0001 --until turn_left_fw \
+  > "$tmp/c-run.log" 2>&1 || fail "C: the cluster recipe failed: $(tail -30 "$tmp/c-run.log") $(tail -20 "$tmp/actor.log")"
+kill -0 $actor 2> /dev/null || fail "C: the actor did not stay up across stages: $(tail -20 "$tmp/actor.log")"
+kill $actor
+wait $actor 2> /dev/null || true
+state "$C" "
+for n in ('walk1','walk2','walk','turn_left','turn_right','turn_left_fw'):
+    assert d['stages'][n]['state']=='done', n
+    assert d['stages'][n]['samples']>0, n" || fail "C: stages"
+# It followed the learner from stage to stage (six training stages, five changes of experiment),
+# and the stage that trains from a bank got the bank from the learner.
+[ "$(grep -c "the learner's experiment changed" "$tmp/actor.log")" -ge 5 ] ||
+  fail "C: the actor did not rebuild at each stage: $(grep -c changed "$tmp/actor.log")"
+grep -q "task turn_left (1 files from the learner)" "$tmp/actor.log" ||
+  fail "C: the turn stage's bank did not come with the config: $(grep 'files from' "$tmp/actor.log")"
+grep -q "learner" "$C/walk1/stage.log" || fail "C: no learner in the stage log"
 echo "recipe_test: OK"

@@ -711,8 +711,8 @@ TEST(MetaEval, TheMetaPolicyWithLookaheadIsExactAndNoWorseThanAlone) {
   EXPECT_EQ(j["decider"], "meta policy");
   ASSERT_GT(j["success_rate"].get<double>(), 0.0);
   // Seated, the pelvis (a capsule of radius 0.09 m) rests well above the seat surface's centre,
-  // the paper's distance target, so no success comes much nearer than that height (docs/meta.md
-  // "Stop 40").
+  // the paper's distance target, so no success comes much nearer than that height
+  // (docs/journal/meta.md "Stop 40").
   EXPECT_GT(j["seated_height_cm_mean"].get<double>(), 5.0);
   EXPECT_LT(j["seated_height_cm_mean"].get<double>(), 15.0);
   EXPECT_GT(j["min_dist_success_mean_m"].get<double>(), 0.05);

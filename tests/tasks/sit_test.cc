@@ -186,7 +186,7 @@ TEST(SitTask, StepsReportSuccessAfterThreeSecondsOfSeatContact) {
 // The paper's distance metric measures the pelvis to the seat surface's centre, but a seated
 // pelvis cannot get there: its capsule rests on the seat, so the pelvis stays about the capsule's
 // radius (0.09 m) above the target, on every chair preset. This is the floor of a success's min
-// distance (docs/meta.md "Stop 40").
+// distance (docs/journal/meta.md "Stop 40").
 TEST(SitTask, ASeatedPelvisStaysAboutItsCapsuleRadiusAboveTheSeatTarget) {
   for (const std::string& chair : Chair::PresetNames()) {
     SCOPED_TRACE(chair);
