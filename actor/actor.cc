@@ -11,9 +11,9 @@
 #include <thread>
 
 #include "common/proto/model.pb.h"
-#include "learner/service/learner.h"
-#include "learner/service/security.h"
-#include "learner/service/wire.h"
+#include "protocol/clock.h"
+#include "protocol/security.h"
+#include "protocol/wire.h"
 
 namespace perch {
 

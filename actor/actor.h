@@ -16,9 +16,9 @@
 #include "common/env.h"
 #include "common/proto/wire.pb.h"
 #include "common/rng.h"
-#include "learner/policy.h"
-#include "learner/rollout.h"
-#include "learner/service/cluster_config.h"
+#include "policy/policy.h"
+#include "policy/rollout.h"
+#include "protocol/cluster_config.h"
 
 namespace perch {
 
@@ -57,7 +57,7 @@ struct ActorOptions {
   // An actor started without --config: Run() returns when the learner publishes another
   // experiment config than setup.config_json (a recipe's next stage), to be rebuilt from it.
   bool end_on_new_config = false;
-  EnvSpec replay_spec;                // what Hello reports
+  EnvSpec replay_spec;  // what Hello reports
 };
 
 struct ActorCounters {

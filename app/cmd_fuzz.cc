@@ -18,7 +18,6 @@
 #include <string>
 #include <vector>
 
-#include "actor/experiment.h"
 #include "app/commands.h"
 #include "common/config_file.h"
 #include "common/json_util.h"
@@ -26,11 +25,12 @@
 #include "common/proto/model.pb.h"
 #include "common/proto/wire.pb.h"
 #include "common/rng.h"
+#include "experiment/experiment.h"
 #include "learner/ppo.h"
-#include "learner/rollout.h"
 #include "learner/service/checkpoint.h"
-#include "learner/service/wire.h"
 #include "motion/bvh.h"
+#include "policy/rollout.h"
+#include "protocol/wire.h"
 
 namespace perch {
 namespace {

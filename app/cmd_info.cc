@@ -5,12 +5,12 @@
 #include <string>
 #include <vector>
 
-#include "actor/experiment.h"
 #include "app/commands.h"
 #include "common/config_file.h"
 #include "common/json_util.h"
 #include "common/paths.h"
-#include "learner/dense_kernels.h"
+#include "experiment/experiment.h"
+#include "policy/dense_kernels.h"
 #include "tasks/recording.h"
 
 namespace perch {
@@ -31,8 +31,8 @@ void RegisterInfoCommands(CLI::App& root, CLI::App& /*bench*/) {
       std::cout << j.dump() << "\n";
     } else {
       std::cout << "perch " << PerchVersion() << "\nexecutable: " << ExecutablePath()
-                << "\ndata: " << d.root << " (" << d.origin << ")\nsimd: "
-                << ActiveDenseKernels().name << "\n";
+                << "\ndata: " << d.root << " (" << d.origin
+                << ")\nsimd: " << ActiveDenseKernels().name << "\n";
     }
   });
 
@@ -44,10 +44,12 @@ void RegisterInfoCommands(CLI::App& root, CLI::App& /*bench*/) {
     bool resolved = false;
   };
   auto c = std::make_shared<ConfigArgs>();
-  CLI::App* cc = root.add_subcommand("config", "Print a config as composed (base, --set) or fully resolved");
+  CLI::App* cc =
+      root.add_subcommand("config", "Print a config as composed (base, --set) or fully resolved");
   cc->add_option("--config", c->config, "experiment config (JSON)")->required();
   cc->add_option("--set", c->sets, "override a config field: section.field=VALUE (repeatable)");
-  cc->add_flag("--resolved", c->resolved, "validate and fill in every default (as a run records it)");
+  cc->add_flag("--resolved", c->resolved,
+               "validate and fill in every default (as a run records it)");
   cc->callback([c] {
     if (c->resolved) {
       std::cout << ToJson(LoadExperimentConfig(c->config, c->sets)).dump(2) << "\n";

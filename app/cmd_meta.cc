@@ -1,19 +1,19 @@
-// perch meta-clone: the scripted planner cloned into a meta policy (tasks/meta_clone.h).
+// perch meta-clone: the scripted planner cloned into a meta policy (learner/local/meta_clone.h).
 #include <chrono>
 #include <filesystem>
 #include <iostream>
 #include <memory>
 #include <thread>
 
-#include "actor/experiment.h"
 #include "app/commands.h"
 #include "common/file_util.h"
 #include "common/json_util.h"
 #include "common/paths.h"
+#include "experiment/experiment.h"
+#include "learner/local/meta_clone.h"
 #include "learner/service/checkpoint.h"
-#include "learner/service/wire.h"
+#include "protocol/wire.h"
 #include "tasks/hierarchy.h"
-#include "tasks/meta_clone.h"
 #include "tasks/meta_expert.h"
 #include "tasks/model_source.h"
 #include "tasks/task_env.h"

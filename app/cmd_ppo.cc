@@ -16,13 +16,15 @@
 #include <vector>
 
 #include "app/commands.h"
+#include "common/file_util.h"
 #include "common/json_util.h"
 #include "common/proto/model.pb.h"
-#include "learner/dense_kernels.h"
-#include "learner/policy.h"
+#include "common/stop_signal.h"
 #include "learner/ppo.h"
-#include "learner/rollout.h"
 #include "learner/toy_envs.h"
+#include "policy/dense_kernels.h"
+#include "policy/policy.h"
+#include "policy/rollout.h"
 
 namespace perch {
 namespace {
@@ -37,11 +39,6 @@ double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   const size_t n = v.size();
   return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-void UseStderrLogger() {
-  auto logger = spdlog::stderr_color_mt("ppo");
-  spdlog::set_default_logger(logger);
 }
 
 struct BenchOptions {
@@ -302,13 +299,7 @@ Json RunToy(const ToyOptions& o) {
     learner.ExportState(&state);
     std::string bytes;
     state.SerializeToString(&bytes);
-    const std::string path = o.out_dir + "/learner_state.pb";
-    const std::string tmp = path + ".tmp";
-    FILE* f = std::fopen(tmp.c_str(), "wb");
-    if (f == nullptr) throw ConfigError(tmp + ": cannot write");
-    std::fwrite(bytes.data(), 1, bytes.size(), f);
-    std::fclose(f);
-    std::filesystem::rename(tmp, path);
+    WriteFileAtomic(o.out_dir + "/learner_state.pb", bytes);
   }
   return Json{{"config", resolved},
               {"curve", curve},
@@ -339,7 +330,7 @@ void RegisterLearnerCommands(CLI::App& root, CLI::App& bench) {
               "cores give on this machine, the ceiling for N threads)");
   b->add_flag("--json", bo->json, "print one JSON object");
   b->callback([bo] {
-    UseStderrLogger();
+    LogToStderr("ppo");
     RunBench(*bo);
   });
 
@@ -354,7 +345,7 @@ void RegisterLearnerCommands(CLI::App& root, CLI::App& bench) {
   toy->add_option("--seed", to->seed, "seed");
   toy->add_flag("--json", to->json, "print one JSON object");
   toy->callback([to] {
-    UseStderrLogger();
+    LogToStderr("ppo");
     const Json j = RunToy(*to);
     if (to->json) {
       std::cout << j.dump() << std::endl;

@@ -11,14 +11,14 @@
 #include <string>
 #include <vector>
 
-#include "actor/experiment.h"
 #include "actor/role_setup.h"
 #include "app/commands.h"
 #include "common/json_util.h"
 #include "common/proto/model.pb.h"
 #include "envs/physics_profile.h"
-#include "learner/policy.h"
-#include "learner/rollout.h"
+#include "experiment/experiment.h"
+#include "policy/policy.h"
+#include "policy/rollout.h"
 #include "tasks/walk_eval.h"
 
 namespace perch {

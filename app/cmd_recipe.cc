@@ -1,21 +1,14 @@
 // perch recipe run / status: a training recipe from an empty directory to a delivered hierarchy
 // (recipe/runner.h, docs/recipe.md).
-#include <signal.h>
-
 #include <atomic>
 #include <iostream>
 #include <memory>
 
 #include "app/commands.h"
+#include "common/stop_signal.h"
 #include "recipe/runner.h"
 
 namespace perch {
-namespace {
-
-std::atomic<bool> g_recipe_stop{false};
-void OnRecipeStop(int) { g_recipe_stop.store(true); }
-
-}  // namespace
 
 void RegisterRecipeCommands(CLI::App& root, CLI::App& /*bench*/) {
   CLI::App* recipe = root.add_subcommand("recipe", "Training recipes: every stage in one command");
@@ -51,13 +44,8 @@ void RegisterRecipeCommands(CLI::App& root, CLI::App& /*bench*/) {
   run->add_flag("--check-config", f->check,
                 "read the recipe and the state, say what would run, and exit (manifest checks)");
   run->callback([f] {
-    struct sigaction sa {};
-    sa.sa_handler = OnRecipeStop;
-    sigemptyset(&sa.sa_mask);
-    ::sigaction(SIGINT, &sa, nullptr);
-    ::sigaction(SIGTERM, &sa, nullptr);
-    ::signal(SIGPIPE, SIG_IGN);
-    f->stop = &g_recipe_stop;
+    InstallStopHandlers();
+    f->stop = &StopFlag();
     const int code = RunRecipe(*f);
     if (code != 0) std::exit(code);
   });

@@ -19,5 +19,6 @@ void RegisterInfoCommands(CLI::App& root, CLI::App& bench);     // app/cmd_info.
 void RegisterMetaCommands(CLI::App& root, CLI::App& bench);     // app/cmd_meta.cc
 void RegisterFuzzCommand(CLI::App& root);                       // app/cmd_fuzz.cc
 void RegisterRecipeCommands(CLI::App& root, CLI::App& bench);   // app/cmd_recipe.cc
+void RegisterBenchCommands(CLI::App& root, CLI::App& bench);    // app/cmd_bench.cc
 
 }  // namespace perch

@@ -1,16 +1,15 @@
 // perch: the one command-line program. Config is read here (by each subcommand's handler) and
 // passed down in typed structs.
+#include <CLI/CLI.hpp>
 #include <cstdlib>
 #include <exception>
 #include <iostream>
 
-#include <CLI/CLI.hpp>
-
 #include "app/cli_check.h"
 #include "app/commands.h"
-#include "learner/service/wire.h"
 #include "common/json_util.h"
 #include "common/paths.h"
+#include "protocol/wire.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"Perch: distributed RL that teaches a simulated humanoid to sit on a chair"};
@@ -27,6 +26,7 @@ int main(int argc, char** argv) {
   perch::RegisterMotionCommands(app, *bench);
   perch::RegisterLearnerCommands(app, *bench);
   perch::RegisterClusterCommands(app, *bench);
+  perch::RegisterBenchCommands(app, *bench);
   perch::RegisterVizCommands(app, *bench);
   perch::RegisterEvalCommands(app, *bench);
   perch::RegisterProfileCommands(app, *bench);

@@ -18,7 +18,7 @@ struct ObsSlice {
 // The env's left/right symmetry (world y -> -y) on its flat arrays: the mirror image of a state
 // observes obs'[i] = obs_scale[i] * obs[obs_src[i]] + obs_offset[i], and the mirror image of an
 // action is act'[i] = act_scale[i] * act[act_src[i]] + act_offset[i]. A policy for the mirrored
-// task (turn right from turn left) is then pi'(o) = M_act(pi(M_obs(o))) (learner/policy.h,
+// task (turn right from turn left) is then pi'(o) = M_act(pi(M_obs(o))) (policy/policy.h,
 // MirrorModelWeights). Empty when the env has no such symmetry.
 struct MirrorMap {
   std::vector<int> obs_src;       // [obs_dim] a permutation

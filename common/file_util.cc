@@ -1,14 +1,18 @@
 #include "common/file_util.h"
 
-#include "common/json_util.h"
-
 #include <fcntl.h>
+#include <openssl/evp.h>
+#include <sys/stat.h>
 #include <unistd.h>
+#include <zlib.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <stdexcept>
+
+#include "common/json_util.h"
 
 namespace perch {
 namespace {
@@ -22,21 +26,34 @@ std::string DirOf(const std::string& path) {
 }  // namespace
 
 uint32_t Crc32(const void* data, size_t size) {
-  static uint32_t table[256];
-  static bool init = [] {
-    for (uint32_t i = 0; i < 256; ++i) {
-      uint32_t c = i;
-      for (int k = 0; k < 8; ++k) c = (c & 1) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
-      table[i] = c;
-    }
-    return true;
-  }();
-  (void)init;
-  uint32_t crc = 0xFFFFFFFFu;
-  const auto* p = static_cast<const unsigned char*>(data);
-  for (size_t i = 0; i < size; ++i) crc = table[(crc ^ p[i]) & 0xff] ^ (crc >> 8);
-  return crc ^ 0xFFFFFFFFu;
+  // zlib takes a uInt length; feed larger buffers in pieces.
+  uLong crc = crc32(0L, Z_NULL, 0);
+  const auto* p = static_cast<const Bytef*>(data);
+  while (size > 0) {
+    const uInt n = static_cast<uInt>(std::min<size_t>(size, 1u << 30));
+    crc = crc32(crc, p, n);
+    p += n;
+    size -= n;
+  }
+  return static_cast<uint32_t>(crc);
 }
+
+std::string Sha256Hex(const std::string& bytes) {
+  unsigned char md[EVP_MAX_MD_SIZE];
+  unsigned int len = 0;
+  if (EVP_Digest(bytes.data(), bytes.size(), md, &len, EVP_sha256(), nullptr) != 1) {
+    throw std::runtime_error("SHA-256 failed");
+  }
+  static const char* hex = "0123456789abcdef";
+  std::string out;
+  for (unsigned int i = 0; i < len; ++i) {
+    out.push_back(hex[md[i] >> 4]);
+    out.push_back(hex[md[i] & 15]);
+  }
+  return out;
+}
+
+std::string FileSha256(const std::string& path) { return Sha256Hex(ReadFileBytes(path)); }
 
 std::string ReadFileBytes(const std::string& path, const std::string& noun) {
   // POSIX reads, not an ifstream: a stream's read error (a directory, an I/O error) would look
@@ -60,32 +77,49 @@ std::string ReadFileBytes(const std::string& path, const std::string& noun) {
   return bytes;
 }
 
-void WriteFileAtomic(const std::string& path, const std::string& bytes) {
+void WriteFileAtomic(const std::string& path, const std::string& bytes, unsigned mode) {
   const std::string tmp = path + ".tmp";
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  if (fd < 0) throw std::runtime_error(tmp + ": cannot create: " + std::strerror(errno));
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, mode);
+  if (fd < 0) throw ConfigError(tmp + ": cannot create: " + std::strerror(errno));
+  // A leftover temporary file keeps its old mode; set it before any byte is written.
+  ::fchmod(fd, mode);
   size_t off = 0;
   while (off < bytes.size()) {
     const ssize_t n = ::write(fd, bytes.data() + off, bytes.size() - off);
+    if (n < 0 && errno == EINTR) continue;
     if (n <= 0) {
-      const std::string err = std::strerror(errno);
+      const std::string err = n < 0 ? std::strerror(errno) : "no progress";
       ::close(fd);
       ::unlink(tmp.c_str());
-      throw std::runtime_error(tmp + ": write failed: " + err);
+      throw ConfigError(tmp + ": write failed: " + err);
     }
     off += static_cast<size_t>(n);
   }
-  if (::fsync(fd) != 0 || ::close(fd) != 0) {
+  if (::close(fd) != 0) {
+    const std::string err = std::strerror(errno);
     ::unlink(tmp.c_str());
-    throw std::runtime_error(tmp + ": fsync/close failed");
+    throw ConfigError(tmp + ": close failed: " + err);
   }
+  CommitFileAtomic(tmp, path);
+}
+
+void CommitFileAtomic(const std::string& tmp, const std::string& path) {
+  const int fd = ::open(tmp.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw ConfigError(tmp + ": cannot open: " + std::strerror(errno));
+  if (::fsync(fd) != 0) {
+    const std::string err = std::strerror(errno);
+    ::close(fd);
+    ::unlink(tmp.c_str());
+    throw ConfigError(tmp + ": fsync failed: " + err);
+  }
+  ::close(fd);
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
     const std::string err = std::strerror(errno);
     ::unlink(tmp.c_str());
-    throw std::runtime_error(path + ": rename failed: " + err);
+    throw ConfigError(path + ": rename failed: " + err);
   }
   // Make the rename itself durable.
-  const int dfd = ::open(DirOf(path).c_str(), O_RDONLY | O_DIRECTORY);
+  const int dfd = ::open(DirOf(path).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
   if (dfd >= 0) {
     ::fsync(dfd);
     ::close(dfd);
@@ -130,14 +164,18 @@ std::string UnframePayload(const std::string& bytes, const std::string& path,
   const uint64_t len = GetLe(bytes, 12, 8);
   if (bytes.size() - kFrameHeaderBytes != len) {
     throw ConfigError(path + ": " + noun + " payload is " +
-                      std::to_string(bytes.size() - kFrameHeaderBytes) + " bytes, its header says " +
-                      std::to_string(len) + " (truncated or corrupt)");
+                      std::to_string(bytes.size() - kFrameHeaderBytes) +
+                      " bytes, its header says " + std::to_string(len) + " (truncated or corrupt)");
   }
   std::string payload = bytes.substr(kFrameHeaderBytes);
   if (Crc32(payload.data(), payload.size()) != static_cast<uint32_t>(GetLe(bytes, 20, 4))) {
     throw ConfigError(path + ": " + noun + " CRC-32 mismatch (corrupt)");
   }
   return payload;
+}
+
+bool HasCheckpointMagic(const std::string& bytes) {
+  return bytes.size() >= 8 && std::memcmp(bytes.data(), kCheckpointMagic, 8) == 0;
 }
 
 }  // namespace perch

@@ -33,26 +33,7 @@ Json LoadJsonFile(const std::string& path) {
 }
 
 void SaveJsonFileAtomic(const std::string& path, const Json& j) {
-  const std::string tmp = path + ".tmp";
-  const std::string text = j.dump(2) + "\n";
-  int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  if (fd < 0) throw ConfigError(tmp + ": cannot create file");
-  size_t off = 0;
-  while (off < text.size()) {
-    ssize_t n = ::write(fd, text.data() + off, text.size() - off);
-    if (n <= 0) {
-      ::close(fd);
-      ::unlink(tmp.c_str());
-      throw ConfigError(tmp + ": write failed");
-    }
-    off += static_cast<size_t>(n);
-  }
-  ::fsync(fd);
-  ::close(fd);
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    ::unlink(tmp.c_str());
-    throw ConfigError(path + ": rename failed");
-  }
+  WriteFileAtomic(path, j.dump(2) + "\n");
 }
 
 void CheckKnownKeys(const Json& j, std::initializer_list<const char*> known,

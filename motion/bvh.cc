@@ -277,14 +277,7 @@ std::string WriteBvh(const BvhClip& clip) {
 }
 
 void SaveBvhFile(const std::string& path, const BvhClip& clip) {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp);
-    if (!out) throw ConfigError(tmp + ": cannot create file");
-    out << WriteBvh(clip);
-    if (!out) throw ConfigError(tmp + ": write failed");
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) throw ConfigError(path + ": rename failed");
+  WriteFileAtomic(path, WriteBvh(clip));
 }
 
 Eigen::Matrix3d BvhLocalRotation(const BvhJoint& j, const double* row) {

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <fstream>
 
+#include "common/file_util.h"
 #include "envs/humanoid_model.h"
 
 namespace perch {
@@ -345,18 +346,7 @@ void ReferenceMotion::Save(const std::string& path) const {
     }
   }
   text += "\n}\n";
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp);
-    if (!out) throw ConfigError(tmp + ": cannot create file");
-    out << text;
-    out.flush();
-    if (!out) throw ConfigError(tmp + ": write failed");
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    throw ConfigError(path + ": cannot replace file");
-  }
+  WriteFileAtomic(path, text);
 }
 
 }  // namespace perch

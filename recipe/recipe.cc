@@ -1,7 +1,5 @@
 #include "recipe/recipe.h"
 
-#include <openssl/evp.h>
-
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -292,23 +290,6 @@ RecipeStage ScaledStage(const RecipeStage& s, const RecipeRunOptions& o) {
   return r;
 }
 
-std::string Sha256HexOf(const std::string& bytes) {
-  unsigned char md[EVP_MAX_MD_SIZE];
-  unsigned int len = 0;
-  if (EVP_Digest(bytes.data(), bytes.size(), md, &len, EVP_sha256(), nullptr) != 1) {
-    throw std::runtime_error("SHA-256 failed");
-  }
-  static const char* hex = "0123456789abcdef";
-  std::string out;
-  for (unsigned int i = 0; i < len; ++i) {
-    out += hex[md[i] >> 4];
-    out += hex[md[i] & 15];
-  }
-  return out;
-}
-
-std::string Sha256OfFile(const std::string& path) { return Sha256HexOf(ReadFileBytes(path)); }
-
 std::string StageFingerprint(const RecipeStage& scaled, const Json& composed_config,
                              const std::map<std::string, std::string>& input_sha256) {
   Json def{{"kind", scaled.kind},
@@ -326,29 +307,32 @@ std::string StageFingerprint(const RecipeStage& scaled, const Json& composed_con
   if (!scaled.optional_outputs.empty()) def["optional_outputs"] = scaled.optional_outputs;
   // Not in it: doc, est_wall_s, figures and actors (how many processes step the envs does not
   // change what a run means; a resumed stage may use another count).
-  return Sha256HexOf(def.dump());
+  return Sha256Hex(def.dump());
 }
 
 Json ToJson(const StageRecord& r) {
-  return Json{{"state", r.state},
-              {"fingerprint", r.fingerprint},
-              {"samples", r.samples},
-              {"wall_s", r.wall_s},
-              {"attempts", r.attempts},
-              {"outputs", r.outputs},
-              {"output_sha256", r.output_sha256},
-              {"figures", r.figures},
-              {"error", r.error},
-              {"started_at", r.started_at},
-              {"finished_at", r.finished_at}};
+  Json j{{"state", r.state},
+         {"fingerprint", r.fingerprint},
+         {"samples", r.samples},
+         {"wall_s", r.wall_s},
+         {"attempts", r.attempts},
+         {"outputs", r.outputs},
+         {"output_sha256", r.output_sha256},
+         {"figures", r.figures},
+         {"error", r.error},
+         {"started_at", r.started_at},
+         {"finished_at", r.finished_at}};
+  if (r.attempt_started_unix > 0) j["attempt_started_unix"] = r.attempt_started_unix;
+  return j;
 }
 
 StageRecord StageRecordFromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(j,
-                 {"state", "fingerprint", "samples", "wall_s", "attempts", "outputs",
-                  "output_sha256", "figures", "error", "started_at", "finished_at"},
-                 ctx);
+  CheckKnownKeys(
+      j,
+      {"state", "fingerprint", "samples", "wall_s", "attempts", "outputs", "output_sha256",
+       "figures", "error", "started_at", "finished_at", "attempt_started_unix"},
+      ctx);
   StageRecord r;
   GetOptional(j, "state", r.state, ctx);
   GetOptional(j, "fingerprint", r.fingerprint, ctx);
@@ -360,6 +344,7 @@ StageRecord StageRecordFromJson(const Json& j, const std::string& ctx) {
   if (j.contains("figures")) r.figures = j["figures"];
   GetOptional(j, "error", r.error, ctx);
   GetOptional(j, "started_at", r.started_at, ctx);
+  GetOptional(j, "attempt_started_unix", r.attempt_started_unix, ctx);
   GetOptional(j, "finished_at", r.finished_at, ctx);
   static const std::set<std::string> states = {"pending", "running", "done", "failed"};
   if (!states.count(r.state)) throw ConfigError(ctx + ".state: \"" + r.state + "\" is not a state");

@@ -114,9 +114,6 @@ std::string StageCommand(const RecipeStage& s);
 std::string StageFingerprint(const RecipeStage& scaled, const Json& composed_config,
                              const std::map<std::string, std::string>& input_sha256);
 
-std::string Sha256HexOf(const std::string& bytes);
-std::string Sha256OfFile(const std::string& path);  // ConfigError when unreadable
-
 // The state file (D/recipe-state.json): one record per stage.
 struct StageRecord {
   std::string state = "pending";  // pending, running, done, failed
@@ -129,6 +126,9 @@ struct StageRecord {
   Json figures = Json::object();
   std::string error;  // the last failure: what and the log's last lines
   std::string started_at, finished_at;
+  // Unix time the running attempt began (0 when none runs), so that status shows a running
+  // stage's wall time while it runs.
+  double attempt_started_unix = 0.0;
 };
 
 struct RecipeState {

@@ -32,6 +32,10 @@ namespace fs = std::filesystem;
 double Now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
+// Wall-clock seconds since the epoch: what another process (status) can compare with.
+double UnixNow() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
 
 std::string UtcStamp() {
   const std::time_t t = std::time(nullptr);
@@ -174,6 +178,8 @@ class Runner {
   int Run();
 
  private:
+  // The stages asked for (--from .. --until), as indices into r_.stages.
+  int from_ = 0, until_ = -1;
   std::string StageDir(const std::string& name) const { return dir_ + "/" + name; }
   std::string OutputPath(const std::string& stage, const std::string& out) const {
     const int i = r_.Index(stage);
@@ -413,7 +419,7 @@ void Runner::Train(const RecipeStage& s, Live* live, StageRecord* rec) {
           throw std::runtime_error("selection eval of " + cand[i] + " " + DescribeStatus(status) +
                                    "; " + log + ":\n" + LastLines(log, 15));
         }
-        fs::rename(out + ".tmp", out);
+        CommitFileAtomic(out + ".tmp", out);
         result = Json::parse(ReadFileBytes(out), nullptr, false);
       }
       if (!result.is_object() || !result.contains(s.select.metric) ||
@@ -541,7 +547,7 @@ void Runner::RunStage(const RecipeStage& st, Live* live) {
           throw std::runtime_error("the stage left no output " + name + " (" + p + ")");
         }
         rec.outputs[name] = s.name + "/" + file;
-        rec.output_sha256[name] = Sha256OfFile(p);
+        rec.output_sha256[name] = FileSha256(p);
       }
     }
   } catch (const std::exception& e) {
@@ -552,6 +558,7 @@ void Runner::RunStage(const RecipeStage& st, Live* live) {
   StageRecord& r = state_.stages[s.name];
   const double spent = Now() - t0;
   r.wall_s += spent;
+  r.attempt_started_unix = 0.0;
   if (s.kind == "train") r.samples = std::max(rec.samples, RunSamples(StageDir(s.name) + "/run"));
   if (live->code == 0) {
     r.state = "done";
@@ -574,8 +581,8 @@ void Runner::Progress() {
   const double now = Now();
   double eta_total = 0.0;
   int done = 0;
-  for (const RecipeStage& st : r_.stages) {
-    const RecipeStage s = ScaledStage(st, f_.options);
+  for (int i = from_; i <= until_; ++i) {
+    const RecipeStage s = ScaledStage(r_.stages[i], f_.options);
     auto rec = state_.stages.find(s.name);
     if (rec != state_.stages.end() && rec->second.state == "done") {
       ++done;
@@ -604,7 +611,9 @@ void Runner::Progress() {
       eta_total += s.est_wall_s;
     }
   }
-  std::cerr << "[recipe] " << done << " of " << r_.stages.size() << " stages done; recipe ETA "
+  const int asked = until_ - from_ + 1;
+  std::cerr << "[recipe] " << done << " of " << asked << " stages"
+            << (asked == static_cast<int>(r_.stages.size()) ? "" : " asked for") << " done; ETA "
             << Duration(eta_total) << "\n";
 }
 
@@ -630,7 +639,7 @@ int Runner::Run() {
       const std::string p = dir_ + "/" + rel;
       std::string sha;
       try {
-        sha = Sha256OfFile(p);
+        sha = FileSha256(p);
       } catch (const std::exception&) {
         sha = "(missing)";
       }
@@ -695,6 +704,8 @@ int Runner::Run() {
   if (from < 0) throw ConfigError("--from: no stage \"" + f_.from + "\" in " + r_.path);
   if (until < 0) throw ConfigError("--until: no stage \"" + f_.until + "\" in " + r_.path);
   if (until < from) throw ConfigError("--until " + f_.until + " comes before --from " + f_.from);
+  from_ = from;
+  until_ = until;
   for (int i = from; i <= until; ++i) {
     for (const std::string& d : r_.stages[i].deps) {
       const int di = r_.Index(d);
@@ -705,10 +716,8 @@ int Runner::Run() {
       }
     }
   }
-  for (const RecipeStage& s : r_.stages) {
-    StageRecord& rec = state_.stages[s.name];
-    (void)rec;
-  }
+  // Every stage has a record (pending until it starts), so the state file lists them all.
+  for (const RecipeStage& s : r_.stages) state_.stages.emplace(s.name, StageRecord{});
   if (f_.check) {
     int done = 0;
     for (const RecipeStage& s : r_.stages) done += state_.stages[s.name].state == "done";
@@ -727,7 +736,7 @@ int Runner::Run() {
   int code = 0;
   double last_progress = Now();
   for (;;) {
-    bool all_done = true, any_ready = false;
+    bool all_done = true;
     {
       std::lock_guard<std::mutex> g(mu_);
       for (int i = from; i <= until && code == 0; ++i) {
@@ -740,8 +749,8 @@ int Runner::Run() {
         for (const std::string& d : s.deps) ready = ready && state_.stages[d].state == "done";
         if (!ready || static_cast<int>(threads.size()) >= f_.parallel) continue;
         if (f_.stop && f_.stop->load()) continue;
-        any_ready = true;
         rec.state = "running";
+        rec.attempt_started_unix = UnixNow();
         rec.attempts += 1;
         rec.fingerprint = fingerprints_[s.name].empty() ? Fingerprint(s) : fingerprints_[s.name];
         if (rec.started_at.empty()) rec.started_at = UtcStamp();
@@ -759,7 +768,6 @@ int Runner::Run() {
         threads[s.name] = std::thread([this, &s, &l] { RunStage(s, &l); });
       }
     }
-    (void)any_ready;
     if (all_done && threads.empty()) break;
     if (threads.empty() && code != 0) break;
     if (threads.empty() && f_.stop && f_.stop->load()) {
@@ -871,13 +879,18 @@ Json RecipeStatus(const std::string& dir) {
     if (s.kind == "train" && rec.state == "running") {
       samples = std::max(samples, RunSamples(dir + "/" + s.name + "/run"));
     }
+    // A running stage's wall time: earlier attempts plus the one under way.
+    double wall_s = rec.wall_s;
+    if (rec.state == "running" && alive && rec.attempt_started_unix > 0) {
+      wall_s += std::max(0.0, UnixNow() - rec.attempt_started_unix);
+    }
     Json outputs = Json::object();
     for (const auto& [k, v] : rec.outputs) {
       outputs[k] =
           Json{{"path", v}, {"sha256", rec.output_sha256.count(k) ? rec.output_sha256.at(k) : ""}};
     }
     Json o{{"name", s.name},     {"kind", s.kind},        {"state", rec.state},
-           {"samples", samples}, {"wall_s", rec.wall_s},  {"attempts", rec.attempts},
+           {"samples", samples}, {"wall_s", wall_s},      {"attempts", rec.attempts},
            {"outputs", outputs}, {"figures", rec.figures}};
     if (rec.figures.contains("chosen")) o["chosen"] = rec.figures["chosen"];
     if (!rec.error.empty()) o["error"] = rec.error;
@@ -885,7 +898,7 @@ Json RecipeStatus(const std::string& dir) {
     if (!rec.finished_at.empty()) o["finished_at"] = rec.finished_at;
     stages.push_back(o);
     total_samples += samples;
-    total_wall += rec.wall_s;
+    total_wall += wall_s;
   }
   return Json{{"name", st.recipe_name},         {"dir", dir},
               {"recipe", st.recipe_path},       {"scale", st.scale},
@@ -904,7 +917,8 @@ std::string RecipeStatusText(const Json& s) {
   for (const Json& st : s["stages"]) {
     std::string fig;
     const Json& f = st["figures"];
-    for (const char* k : {"chosen", "success_rate", "fall_rate", "min_dist_mean_m"}) {
+    for (const char* k : {"chosen", "success_rate", "no_fall_rate", "fall_rate",
+                          "seated_position_error_cm_mean", "min_dist_mean_m"}) {
       if (f.contains(k)) fig += std::string(fig.empty() ? "" : ", ") + k + " " + f[k].dump();
     }
     std::string state = st.value("state", "");

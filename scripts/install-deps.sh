@@ -13,7 +13,7 @@ PACKAGES=(
   libcli11-dev
   nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  libpng-dev zlib1g-dev
+  libpng-dev zlib1g-dev clang-format
   libssl-dev
   nodejs chromium fonts-dejavu-core
   libcpp-httplib-dev gnuplot-nox

@@ -16,12 +16,12 @@
 #include "common/json_util.h"
 #include "common/proto/model.pb.h"
 #include "envs/humanoid_env.h"
-#include "learner/policy.h"
+#include "envs/pose_frame.h"
+#include "policy/policy.h"
 #include "tasks/chain_plan.h"
 #include "tasks/clip_task.h"
 #include "tasks/recording.h"
 #include "tasks/task_env.h"
-#include "viz/filmstrip.h"
 
 namespace perch {
 

@@ -15,9 +15,9 @@
 #include "common/json_util.h"
 #include "common/proto/bank.pb.h"
 #include "common/proto/model.pb.h"
+#include "envs/pose_frame.h"
 #include "tasks/chain_plan.h"
 #include "tasks/task_env.h"
-#include "viz/filmstrip.h"
 
 namespace perch {
 
@@ -180,10 +180,5 @@ Json EvaluateMeta(const TaskEnvConfig& config, const proto::ModelWeights& meta,
 // The chance that a positive (second = true) scores higher than a negative, ties counted half
 // (the area under the ROC curve); 0.5 when either group is empty.
 double RankAuc(std::vector<std::pair<float, bool>> scored);
-
-// Fig. 7: the `transitions` of an EvaluateMeta result as a PNG, one matrix per start side; rows
-// are where a run of one subtask came from (start or a subtask), columns what followed (a subtask
-// or the episode's end); cells shaded by the row's share, labelled with the count.
-void SaveTransitionMatrixPng(const Json& result, const std::string& path);
 
 }  // namespace perch

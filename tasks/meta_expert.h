@@ -1,6 +1,6 @@
 // A scripted meta controller (ours; issue 15): the planned hand-over of tasks/chain_plan.h decided
 // at the meta controller's own rate, through MetaEnv's hybrid action. It is the teacher a meta
-// policy is cloned from (tasks/meta_clone.h) and a row of the evaluation ("planner").
+// policy is cloned from (learner/local/meta_clone.h) and a row of the evaluation ("planner").
 //
 // Each meta step: while walking, steer the walker so that the turn would end where the sit's clip
 // starts, and choose the turn at the decision whose predicted turn end is nearest to it; while
@@ -40,7 +40,7 @@ class MetaPlanner {
   std::shared_ptr<const MetaPlan> plan_;
   int side_ = -1;  // 0 left, 1 right; chosen at the first decision
   // The subtask seen acting at the last decision and the control step it began (whoever chose
-  // it: a cloned policy may drive while the planner labels, tasks/meta_clone.h).
+  // it: a cloned policy may drive while the planner labels, learner/local/meta_clone.h).
   int last_active_ = -1;
   int active_since_step_ = 0;
   // The value gate (PlannerConfig::turn_value_min): the control step at which the rule first

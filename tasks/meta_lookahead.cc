@@ -5,7 +5,7 @@
 #include <limits>
 #include <utility>
 
-#include "learner/policy.h"
+#include "policy/policy.h"
 #include "tasks/imitation.h"
 
 namespace perch {

@@ -10,27 +10,6 @@
 namespace perch {
 namespace {
 
-constexpr char kCheckpointMagic[8] = {'P', 'E', 'R', 'C', 'H', 'C', 'K', 'P'};
-constexpr size_t kCheckpointHeader = 8 + 4 + 8 + 4;  // magic, format, length, CRC-32
-
-// CRC-32 (IEEE, reflected), as learner/service/checkpoint.cc frames checkpoints.
-uint32_t Crc32(const std::string& s) {
-  uint32_t crc = 0xFFFFFFFFu;
-  for (unsigned char b : s) {
-    crc ^= b;
-    for (int k = 0; k < 8; ++k) crc = (crc & 1) ? 0xEDB88320u ^ (crc >> 1) : crc >> 1;
-  }
-  return crc ^ 0xFFFFFFFFu;
-}
-
-template <typename T>
-T ReadLe(const std::string& s, size_t at) {
-  T v = 0;
-  for (size_t i = 0; i < sizeof(T); ++i)
-    v |= static_cast<T>(static_cast<unsigned char>(s[at + i])) << (8 * i);
-  return v;
-}
-
 // A parsed ModelWeights that is self-consistent (a shape and as many params as it says).
 bool Plausible(const proto::ModelWeights& w) {
   return w.has_shape() && !w.shape().kind().empty() && w.shape().obs_dim() > 0 &&
@@ -45,16 +24,8 @@ std::string ReadAll(const std::string& path) {
 
 // A "PERCHCKP" frame's payload, checked (length, CRC-32) and parsed; ConfigError naming the file.
 proto::Checkpoint ParseCheckpoint(const std::string& path, const std::string& bytes) {
-  if (bytes.size() < kCheckpointHeader) throw ConfigError(path + ": truncated checkpoint header");
-  const uint64_t len = ReadLe<uint64_t>(bytes, 12);
-  const uint32_t crc = ReadLe<uint32_t>(bytes, 20);
-  if (bytes.size() - kCheckpointHeader != len) {
-    throw ConfigError(path + ": checkpoint payload is " +
-                      std::to_string(bytes.size() - kCheckpointHeader) + " bytes, header says " +
-                      std::to_string(len) + " (truncated or corrupt)");
-  }
-  const std::string payload = bytes.substr(kCheckpointHeader);
-  if (Crc32(payload) != crc) throw ConfigError(path + ": checkpoint CRC-32 mismatch (corrupt)");
+  const std::string payload =
+      UnframePayload(bytes, path, kCheckpointMagic, kCheckpointFormat, "checkpoint");
   proto::Checkpoint ck;
   if (!ck.ParseFromString(payload)) throw ConfigError(path + ": checkpoint payload does not parse");
   return ck;
@@ -71,7 +42,7 @@ Json SavedConfig(const std::string& model_path) {
     return fs::exists(cfg) ? LoadJsonFile(cfg.string()) : Json();
   }
   const std::string bytes = ReadAll(model_path);
-  if (bytes.size() < 8 || std::memcmp(bytes.data(), kCheckpointMagic, 8) != 0) return Json();
+  if (!HasCheckpointMagic(bytes)) return Json();
   const proto::Checkpoint c = ParseCheckpoint(model_path, bytes);
   if (c.resolved_config_json().empty()) return Json();
   try {
@@ -103,7 +74,7 @@ std::string ModelFile(const std::string& model_path) {
 
 proto::ModelWeights LoadModelFile(const std::string& path) {
   const std::string bytes = ReadAll(path);
-  if (bytes.size() >= 8 && std::memcmp(bytes.data(), kCheckpointMagic, 8) == 0) {
+  if (HasCheckpointMagic(bytes)) {
     const proto::Checkpoint ck = ParseCheckpoint(path, bytes);
     if (!ck.has_trainer() || !Plausible(ck.trainer().model())) {
       throw ConfigError(path + ": checkpoint holds no usable trainer.model");
@@ -136,7 +107,7 @@ FrozenPolicyData LoadFrozenPolicy(const std::string& name, const std::string& mo
 std::vector<FrozenPolicyData> FrozenPoliciesIn(const std::string& model_path) {
   const std::string file = ModelFile(model_path);
   const std::string bytes = ReadAll(file);
-  if (bytes.size() < 8 || std::memcmp(bytes.data(), kCheckpointMagic, 8) != 0) return {};
+  if (!HasCheckpointMagic(bytes)) return {};
   const proto::Checkpoint c = ParseCheckpoint(file, bytes);
   std::vector<FrozenPolicyData> out;
   for (const proto::TaskPolicy& p : c.weights().policies()) {

@@ -1,7 +1,5 @@
 #include "tasks/state_bank.h"
 
-#include <openssl/evp.h>
-
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -13,7 +11,7 @@
 
 #include "common/file_util.h"
 #include "common/paths.h"
-#include "learner/policy.h"
+#include "policy/policy.h"
 
 namespace perch {
 namespace {
@@ -40,23 +38,6 @@ Eigen::Quaterniond Q(const proto::Quat& p) {
 }
 
 }  // namespace
-
-std::string FileSha256(const std::string& path) { return Sha256Hex(ReadFileBytes(path)); }
-
-std::string Sha256Hex(const std::string& bytes) {
-  unsigned char md[EVP_MAX_MD_SIZE];
-  unsigned int len = 0;
-  if (EVP_Digest(bytes.data(), bytes.size(), md, &len, EVP_sha256(), nullptr) != 1) {
-    throw std::runtime_error("SHA-256 failed");
-  }
-  static const char* hex = "0123456789abcdef";
-  std::string out;
-  for (unsigned int i = 0; i < len; ++i) {
-    out.push_back(hex[md[i] >> 4]);
-    out.push_back(hex[md[i] & 15]);
-  }
-  return out;
-}
 
 void WriteStateBank(const std::string& path, const proto::StateBank& bank, bool overwrite) {
   if (!overwrite && std::filesystem::exists(path)) {
@@ -283,6 +264,19 @@ std::shared_ptr<const StartBank> LoadStartBanks(const std::vector<std::string>& 
   }
   cache[key] = bank;
   return bank;
+}
+
+void WriteHandOverBank(const std::string& file, const std::string& task,
+                       const TaskEnvConfig& config, const std::string& model_path, uint64_t seed,
+                       bool stochastic, int episodes_run, std::vector<proto::BankState>& states,
+                       bool overwrite) {
+  const HumanoidModel model = HumanoidModel::Load(config.env.HumanoidPath());
+  proto::StateBank bank = NewStateBank(task, model, seed, stochastic, config.ToJson());
+  bank.set_model_path(model_path);
+  bank.set_count(static_cast<int>(states.size()));
+  bank.set_episodes_run(episodes_run);
+  for (proto::BankState& b : states) *bank.add_states() = std::move(b);
+  WriteStateBank(file, bank, overwrite);
 }
 
 }  // namespace perch

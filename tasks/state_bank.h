@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "common/file_util.h"  // FileSha256, Sha256Hex (used with banks)
 #include "common/proto/bank.pb.h"
 #include "common/proto/model.pb.h"
 #include "envs/humanoid_env.h"
@@ -32,14 +33,18 @@ void WriteStateBank(const std::string& path, const proto::StateBank& bank, bool 
 proto::StateBank NewStateBank(const std::string& task, const HumanoidModel& model, uint64_t seed,
                               bool stochastic, const Json& env_config);
 
+// Hand-overs an evaluation collected (a chain's to sit, or the meta env's to any subtask) as a
+// bank for that subtask's start.banks: `states` (moved out) under a header of the run's `task`,
+// config, model path(s), seed and sampling mode, written as WriteStateBank does.
+void WriteHandOverBank(const std::string& file, const std::string& task,
+                       const TaskEnvConfig& config, const std::string& model_path, uint64_t seed,
+                       bool stochastic, int episodes_run, std::vector<proto::BankState>& states,
+                       bool overwrite);
+
 // The env's state and its task's memory, and back (the inverse restores the episode exactly).
 proto::BankState CaptureState(const HumanoidChairEnv& env);
 EnvState EnvStateOf(const proto::BankState& b);
 HumanoidState HumanoidStateOf(const proto::BankState& b);
-
-// SHA-256 of a file's bytes / of `bytes`, hex.
-std::string FileSha256(const std::string& path);
-std::string Sha256Hex(const std::string& bytes);
 
 struct SampleEndPosesOptions {
   int steps = 60;  // N: keep the state after exactly N control steps ...

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "learner/policy.h"
+#include "policy/policy.h"
 #include "tasks/sit.h"
 #include "tasks/turn.h"
 

@@ -12,10 +12,10 @@
 #include "common/json_util.h"
 #include "common/proto/model.pb.h"
 #include "envs/humanoid_env.h"
+#include "envs/pose_frame.h"
 #include "tasks/foot_sliding.h"
 #include "tasks/recording.h"
 #include "tasks/task_env.h"
-#include "viz/filmstrip.h"
 
 namespace perch {
 

@@ -8,12 +8,12 @@
 
 #include "common/json_util.h"
 #include "common/proto/model.pb.h"
-#include "learner/policy.h"
+#include "envs/pose_frame.h"
+#include "policy/policy.h"
 #include "tasks/foot_sliding.h"
 #include "tasks/model_source.h"
 #include "tasks/recording.h"
 #include "tasks/task_env.h"
-#include "viz/filmstrip.h"
 
 namespace perch {
 

@@ -9,6 +9,8 @@
 #include <stdexcept>
 #include <utility>
 
+#include "common/file_util.h"
+
 namespace perch {
 
 Canvas::Canvas(int width, int height, Rgb background)
@@ -138,19 +140,25 @@ void Canvas::Blit(const Canvas& other, int x, int y) {
     for (int i = 0; i < other.width(); ++i) Set(x + i, y + j, other.at(i, j));
 }
 
+namespace {
+
+void AppendPngBytes(png_structp png, png_bytep data, png_size_t n) {
+  static_cast<std::string*>(png_get_io_ptr(png))->append(reinterpret_cast<const char*>(data), n);
+}
+void FlushNothing(png_structp) {}
+
+}  // namespace
+
 void Canvas::SavePng(const std::string& path) const {
-  const std::string tmp = path + ".tmp";
-  FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) throw std::runtime_error(path + ": cannot write PNG");
+  // Encoded in memory, then written by the one atomic writer (common/file_util.h).
+  std::string bytes;
   png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
   png_infop info = png ? png_create_info_struct(png) : nullptr;
   if (!png || !info || setjmp(png_jmpbuf(png))) {
     png_destroy_write_struct(&png, &info);
-    std::fclose(f);
-    std::remove(tmp.c_str());
     throw std::runtime_error(path + ": PNG encoding failed");
   }
-  png_init_io(png, f);
+  png_set_write_fn(png, &bytes, AppendPngBytes, FlushNothing);
   png_set_IHDR(png, info, width_, height_, 8, PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE,
                PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
   png_write_info(png, info);
@@ -166,10 +174,7 @@ void Canvas::SavePng(const std::string& path) const {
   }
   png_write_end(png, nullptr);
   png_destroy_write_struct(&png, &info);
-  if (std::fclose(f) != 0 || std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    throw std::runtime_error(path + ": cannot write PNG");
-  }
+  WriteFileAtomic(path, bytes);
 }
 
 Canvas Canvas::LoadPng(const std::string& path) {

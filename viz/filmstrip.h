@@ -11,26 +11,16 @@
 #include "envs/chair.h"
 #include "envs/humanoid_model.h"
 #include "envs/humanoid_world.h"  // HumanoidState (plain data, no Bullet)
+#include "envs/pose_frame.h"
 #include "viz/canvas.h"
 
 namespace perch {
 
-struct PoseFrame {
-  Eigen::Vector3d root_pos = Eigen::Vector3d::Zero();  // torso body origin, world [m]
-  Eigen::Quaterniond root_quat = Eigen::Quaterniond::Identity();
-  std::vector<double> q;  // [21] joint angles, observation order [rad]
-  double time_s = 0.0;
-  std::string label;  // drawn after the time stamp (e.g. the active subtask); may be empty
-};
-
-// The frame of a simulated humanoid's state at `time_s` [s], labelled `label`.
-PoseFrame PoseFrameOf(const HumanoidState& s, double time_s, std::string label = "");
-
 struct FilmstripOptions {
-  int panel_px = 220;          // each panel is panel_px x panel_px
-  double margin_m = 0.6;       // world margin around the humanoid and chair [m]
-  double min_extent_m = 2.2;   // smallest world width a panel shows [m]
-  bool follow = false;         // centre each panel on its frame's root instead of one fixed window
+  int panel_px = 220;         // each panel is panel_px x panel_px
+  double margin_m = 0.6;      // world margin around the humanoid and chair [m]
+  double min_extent_m = 2.2;  // smallest world width a panel shows [m]
+  bool follow = false;        // centre each panel on its frame's root instead of one fixed window
   std::vector<Eigen::Vector2d> targets;  // walk targets to mark in the top view, world xy [m]
 };
 

@@ -11,16 +11,10 @@
 #include "common/json_util.h"  // ConfigError
 
 namespace perch {
-namespace {
-
-constexpr char kMagic[8] = {'P', 'E', 'R', 'C', 'H', 'C', 'K', 'P'};
-
-}  // namespace
-
 std::string FrameCheckpoint(const proto::Checkpoint& ckpt) {
   std::string payload;
   if (!ckpt.SerializeToString(&payload)) throw std::runtime_error("checkpoint: serialize failed");
-  return FramePayload(kMagic, kCheckpointFormat, payload);
+  return FramePayload(kCheckpointMagic, kCheckpointFormat, payload);
 }
 
 proto::Checkpoint ReadCheckpointFile(const std::string& path) {
@@ -28,8 +22,8 @@ proto::Checkpoint ReadCheckpointFile(const std::string& path) {
   // CheckpointError, which the store's fallback to an older checkpoint catches.
   std::string payload;
   try {
-    payload = UnframePayload(ReadFileBytes(path, "checkpoint"), path, kMagic, kCheckpointFormat,
-                             "checkpoint");
+    payload = UnframePayload(ReadFileBytes(path, "checkpoint"), path, kCheckpointMagic,
+                             kCheckpointFormat, "checkpoint");
   } catch (const ConfigError& e) {
     throw CheckpointError(e.what());
   }

@@ -11,12 +11,10 @@
 #include <string>
 #include <vector>
 
-#include "common/file_util.h"  // Crc32, FramePayload, WriteFileAtomic
+#include "common/file_util.h"  // kCheckpointMagic/Format, FramePayload, WriteFileAtomic
 #include "common/proto/wire.pb.h"
 
 namespace perch {
-
-constexpr uint32_t kCheckpointFormat = 1;
 
 // Frame/unframe (the shared frame of common/file_util.h). ReadCheckpointFile throws
 // CheckpointError naming the file and the problem (unreadable, not a checkpoint, another format,

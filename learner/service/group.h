@@ -18,7 +18,7 @@
 #include <zmq.hpp>
 
 #include "learner/collective.h"
-#include "learner/service/security.h"
+#include "protocol/security.h"
 
 namespace perch {
 

@@ -13,16 +13,11 @@
 #include <numeric>
 
 #include "common/paths.h"
-#include "learner/service/config_files.h"
 #include "common/proto/model.pb.h"
-#include "learner/dense_kernels.h"
+#include "policy/dense_kernels.h"
+#include "protocol/config_files.h"
 
 namespace perch {
-
-double MonotonicSeconds() {
-  using namespace std::chrono;
-  return duration<double>(steady_clock::now().time_since_epoch()).count();
-}
 
 namespace {
 

@@ -15,16 +15,17 @@
 #include "common/json_util.h"
 #include "common/proto/wire.pb.h"
 #include "common/rng.h"
-#include "learner/policy.h"
 #include "learner/ppo.h"
-#include "learner/rollout.h"
 #include "learner/service/checkpoint.h"
-#include "learner/service/cluster_config.h"
 #include "learner/service/group.h"
 #include "learner/service/metrics_http.h"
 #include "learner/service/progress.h"
-#include "learner/service/security.h"
-#include "learner/service/wire.h"
+#include "policy/policy.h"
+#include "policy/rollout.h"
+#include "protocol/clock.h"
+#include "protocol/cluster_config.h"
+#include "protocol/security.h"
+#include "protocol/wire.h"
 
 namespace perch {
 
@@ -206,8 +207,5 @@ void CheckRunTimeConfig(const LearnerSetup& setup);
 
 // Cuts a torn last line (no newline) off a metrics.jsonl, so rows appended later stay parseable.
 void RepairMetricsFile(const std::string& path);
-
-// Seconds on the monotonic clock.
-double MonotonicSeconds();
 
 }  // namespace perch

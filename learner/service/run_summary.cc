@@ -4,12 +4,13 @@
 
 #include <algorithm>
 #include <cstdlib>
-#include <iterator>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <sstream>
 
+#include "common/file_util.h"
 #include "learner/service/checkpoint.h"
 
 namespace perch {
@@ -107,8 +108,10 @@ void WriteCurveCsv(const RunSummary& s, const std::string& path) {
   for (const CurveRow& r : s.curve) {
     o << r.update << ',' << r.samples << ',' << std::fixed << r.time_s << ',' << r.samples_per_s
       << ',';
-    if (r.has_episodes) o << r.return_mean << ',' << r.episode_length_mean;
-    else o << ',';
+    if (r.has_episodes)
+      o << r.return_mean << ',' << r.episode_length_mean;
+    else
+      o << ',';
     o << ',' << r.policy_lag_mean << ',' << r.log_std_mean << ',' << r.actors << '\n';
     o.unsetf(std::ios::fixed);
   }
@@ -152,10 +155,14 @@ void PlotRuns(const std::vector<RunSummary>& runs, const std::string& png_path) 
     std::ofstream o(f);
     for (const CurveRow& r : runs[i].curve) {
       o << r.samples / 1e6 << ' ' << r.time_s / 3600.0 << ' ';
-      if (r.has_episodes) o << r.return_mean << ' ' << r.episode_length_mean << ' ';
-      else o << "NaN NaN ";
-      if (r.episodes > 0) o << static_cast<double>(r.episodes_terminated) / r.episodes << ' ';
-      else o << "NaN ";
+      if (r.has_episodes)
+        o << r.return_mean << ' ' << r.episode_length_mean << ' ';
+      else
+        o << "NaN NaN ";
+      if (r.episodes > 0)
+        o << static_cast<double>(r.episodes_terminated) / r.episodes << ' ';
+      else
+        o << "NaN ";
       if (r.episodes_judged > 0) {
         o << static_cast<double>(r.episodes_succeeded) / r.episodes_judged << ' ';
       } else {
@@ -175,8 +182,8 @@ void PlotRuns(const std::vector<RunSummary>& runs, const std::string& png_path) 
     << "set datafile missing 'NaN'\nset grid\nset key bottom right\n"
     << "set multiplot layout 5,2 title 'Perch learning curves'\n";
   const char* names[5] = {"return (episode mean)", "episode length (control steps)",
-                          "fall rate (terminated / ended)",
-                          "success rate (training episodes)", "samples/s"};
+                          "fall rate (terminated / ended)", "success rate (training episodes)",
+                          "samples/s"};
   const int cols[5] = {3, 4, 5, 6, 7};
   for (int k = 0; k < 5; ++k) {
     for (int x = 0; x < 2; ++x) {
@@ -210,7 +217,7 @@ void PlotRuns(const std::vector<RunSummary>& runs, const std::string& png_path) 
     throw ConfigError("plot: gnuplot failed (exit " + std::to_string(rc) +
                       "; install gnuplot-nox): " + err_text.substr(0, 400));
   }
-  fs::rename(png_path + ".tmp", png_path);
+  CommitFileAtomic(png_path + ".tmp", png_path);
   fs::remove_all(dir);
 }
 

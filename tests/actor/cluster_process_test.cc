@@ -16,8 +16,8 @@
 
 #include "common/proto/model.pb.h"
 #include "common/proto/wire.pb.h"
-#include "learner/rollout.h"
 #include "learner/service/checkpoint.h"
+#include "policy/rollout.h"
 #include "tests/actor/cluster_fixture.h"
 
 namespace perch {

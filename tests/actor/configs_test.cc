@@ -8,11 +8,12 @@
 #include <string>
 #include <vector>
 
-#include "actor/experiment.h"
 #include "actor/role_setup.h"
 #include "common/config_file.h"
 #include "common/json_util.h"
 #include "common/paths.h"
+#include "experiment/experiment.h"
+#include "learner/service/learner_setup.h"
 #include "tasks/chain_plan.h"
 #include "tasks/task_env.h"
 
@@ -74,17 +75,19 @@ TEST(ExperimentConfig, ClusterTaskMustNameTheEnvsTaskAndIsDerivedWhenAbsent) {
       {{"env", {{"task", "walk"}, {"chair", "none"}}}, {"cluster", {{"task", "left_turn"}}}});
   EXPECT_NE(e.find("x.json.cluster.task"), std::string::npos) << e;
   EXPECT_NE(e.find("walk"), std::string::npos) << e;
-  EXPECT_EQ(ExperimentError({{"env", {{"task", "turn_left"}}}, {"cluster", {{"task", "left_turn"}}}}),
-            "");  // the older spelling of the same task
+  EXPECT_EQ(
+      ExperimentError({{"env", {{"task", "turn_left"}}}, {"cluster", {{"task", "left_turn"}}}}),
+      "");  // the older spelling of the same task
   const ExperimentConfig c = ExperimentConfigFromJson({{"env", {{"task", "sit"}}}}, "x.json");
   EXPECT_EQ(c.cluster.task, "sit");
   // The meta controller runs over sit_chair only: refused by field, not left to crash actors.
   EXPECT_NE(ExperimentError({{"env", {{"task", "sit"}}}, {"cluster", {{"task", "meta"}}}})
                 .find("x.json.cluster.task"),
             std::string::npos);
-  EXPECT_NE(ExperimentError({{"env", {{"task", "sit"}}}, {"cluster", {{"hierarchy_enabled", true}}}})
-                .find("x.json.cluster.hierarchy_enabled"),
-            std::string::npos);
+  EXPECT_NE(
+      ExperimentError({{"env", {{"task", "sit"}}}, {"cluster", {{"hierarchy_enabled", true}}}})
+          .find("x.json.cluster.hierarchy_enabled"),
+      std::string::npos);
   // The mock backend (transport tests) keeps its meta task.
   EXPECT_EQ(ExperimentError({{"env_backend", "mock"}, {"cluster", {{"task", "meta"}}}}), "");
 }
@@ -92,10 +95,9 @@ TEST(ExperimentConfig, ClusterTaskMustNameTheEnvsTaskAndIsDerivedWhenAbsent) {
 // Which subtasks a meta run uses is checked when the learner's setup is made (perch train and
 // --check-config do that first): a wrong model for a subtask is named, not a crash loop.
 TEST(ExperimentConfig, MetaSubtasksAreCheckedAtStartUp) {
-  Json j{{"env",
-          {{"task", "sit_chair"},
-           {"sit_chair", {{"meta", {{"choices", {"walk", "sit"}}}}}}}},
-         {"cluster", {{"task", "meta"}}}};
+  Json j{
+      {"env", {{"task", "sit_chair"}, {"sit_chair", {{"meta", {{"choices", {"walk", "sit"}}}}}}}},
+      {"cluster", {{"task", "meta"}}}};
   ExperimentConfig c = ExperimentConfigFromJson(j, "x.json");
   const LearnerSetup ok = MakeLearnerSetup(c);
   EXPECT_EQ(ok.policy.num_choices, 2);
@@ -124,8 +126,10 @@ TEST(ExperimentConfig, MetaSubtasksAreCheckedAtStartUp) {
 }
 
 TEST(ExperimentConfig, EachSubtaskConfigBuildsItsEnvWithThePapersObservation) {
-  for (const auto& [file, dim] : std::vector<std::pair<std::string, int>>{
-           {"configs/turn_left.json", 50}, {"configs/turn_right.json", 50}, {"configs/sit.json", 57}}) {
+  for (const auto& [file, dim] :
+       std::vector<std::pair<std::string, int>>{{"configs/turn_left.json", 50},
+                                                {"configs/turn_right.json", 50},
+                                                {"configs/sit.json", 57}}) {
     SCOPED_TRACE(file);
     const ExperimentConfig c = LoadExperimentConfig(ResolveProjectPath(file));
     EXPECT_EQ(MakeExperimentEnv(c)->spec().obs_dim, dim);

@@ -12,11 +12,12 @@
 #include <zmq.hpp>
 
 #include "actor/actor.h"
-#include "actor/experiment.h"
 #include "actor/process.h"
 #include "actor/role_setup.h"
+#include "experiment/experiment.h"
 #include "learner/service/learner.h"
-#include "learner/service/security.h"
+#include "learner/service/learner_setup.h"
+#include "protocol/security.h"
 #include "tests/actor/cluster_fixture.h"
 
 namespace perch {

@@ -11,11 +11,12 @@
 #include <zmq.hpp>
 
 #include "actor/actor.h"
-#include "actor/experiment.h"
 #include "actor/role_setup.h"
 #include "common/proto/model.pb.h"
+#include "experiment/experiment.h"
 #include "learner/service/checkpoint.h"
 #include "learner/service/learner.h"
+#include "learner/service/learner_setup.h"
 #include "tests/actor/cluster_fixture.h"
 
 namespace perch {

@@ -1,4 +1,4 @@
-#include "actor/mock_env.h"
+#include "experiment/mock_env.h"
 
 #include <gtest/gtest.h>
 

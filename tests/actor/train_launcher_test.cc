@@ -56,7 +56,9 @@ struct HeldPort {
     a.sin_family = AF_INET;
     a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
     EXPECT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a)), 0);
-    if (listen) EXPECT_EQ(::listen(fd, 1), 0);
+    if (listen) {
+      EXPECT_EQ(::listen(fd, 1), 0);
+    }
     socklen_t len = sizeof(a);
     ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
     port = ntohs(a.sin_port);

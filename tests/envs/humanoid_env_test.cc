@@ -252,7 +252,9 @@ TEST(HumanoidEnv, MirrorMapIsTheEnvsLeftRightSymmetry) {
         // Only the abdomen's joints are their own mirror images.
         const std::string& name = ea.model().joint(ea.model().action_to_joint()[i]).name;
         EXPECT_EQ(j == i, name.rfind("abdomen", 0) == 0) << name;
-        if (mode == ActionMode::kTorque) EXPECT_EQ(std::abs(m.act_scale[i]), 1.0f) << i;
+        if (mode == ActionMode::kTorque) {
+          EXPECT_EQ(std::abs(m.act_scale[i]), 1.0f) << i;
+        }
       }
       auto mirrored = [&](const std::vector<float>& o) {
         std::vector<float> r(o.size());

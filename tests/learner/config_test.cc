@@ -4,8 +4,8 @@
 
 #include <string>
 
-#include "learner/policy.h"
 #include "learner/ppo.h"
+#include "policy/policy.h"
 
 namespace perch {
 namespace {

@@ -9,9 +9,9 @@
 #include <tuple>
 #include <vector>
 
-#include "learner/mlp.h"
-#include "learner/policy.h"
 #include "learner/ppo.h"
+#include "policy/mlp.h"
+#include "policy/policy.h"
 
 namespace perch {
 namespace {

@@ -8,10 +8,10 @@
 #include <functional>
 #include <vector>
 
-#include "learner/policy.h"
 #include "learner/ppo.h"
-#include "learner/rollout.h"
 #include "learner/toy_envs.h"
+#include "policy/policy.h"
+#include "policy/rollout.h"
 
 namespace perch {
 namespace {

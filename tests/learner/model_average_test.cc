@@ -9,7 +9,7 @@
 #include "common/json_util.h"
 #include "common/proto/model.pb.h"
 #include "common/rng.h"
-#include "learner/normalizer.h"
+#include "policy/normalizer.h"
 
 namespace perch {
 namespace {
@@ -44,9 +44,9 @@ TEST(AverageModels, ParamsAreTheElementwiseMeanAndVersionTheNewest) {
   RunningMeanStd s(kDim, 0.0);
   const std::vector<float> x = Samples(1, 10, 0.0, 1.0);
   s.UpdateBatch(x.data(), 10);
-  const proto::ModelWeights avg = AverageModels(
-      {Model(7, {1.0f, -2.0f, 0.5f}, s), Model(9, {3.0f, 2.0f, 0.5f}, s),
-       Model(8, {2.0f, 3.0f, -1.0f}, s)});
+  const proto::ModelWeights avg =
+      AverageModels({Model(7, {1.0f, -2.0f, 0.5f}, s), Model(9, {3.0f, 2.0f, 0.5f}, s),
+                     Model(8, {2.0f, 3.0f, -1.0f}, s)});
   ASSERT_EQ(avg.params_size(), 3);
   EXPECT_FLOAT_EQ(avg.params(0), 2.0f);
   EXPECT_FLOAT_EQ(avg.params(1), 1.0f);

@@ -1,7 +1,7 @@
 // Initialisation (orthogonal, gains sqrt 2 / 0.01 / 1.0, log-std 0), the actor-side runner
 // (agrees with the batched evaluation, samples from the stated distribution, accumulates the
 // observation statistics it ships), and fixed vs trained sigma.
-#include "learner/policy.h"
+#include "policy/policy.h"
 
 #include <gtest/gtest.h>
 

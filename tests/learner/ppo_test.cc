@@ -9,7 +9,7 @@
 #include <utility>
 #include <vector>
 
-#include "learner/policy.h"
+#include "policy/policy.h"
 
 namespace perch {
 namespace {

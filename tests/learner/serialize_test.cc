@@ -7,8 +7,8 @@
 #include <vector>
 
 #include "common/proto/model.pb.h"
-#include "learner/policy.h"
 #include "learner/ppo.h"
+#include "policy/policy.h"
 
 namespace perch {
 namespace {

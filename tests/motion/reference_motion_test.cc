@@ -245,7 +245,9 @@ TEST(Straightened, KeepPelvisSitsTheTorsoUpAndMovesNothingBelowTheWaist) {
           << body;
     }
     for (int j = 0; j < Model().num_joints(); ++j) {
-      if (j != ay) EXPECT_EQ(a.q[j], b.q[j]) << j;
+      if (j != ay) {
+        EXPECT_EQ(a.q[j], b.q[j]) << j;
+      }
     }
   }
   // Seated (last frame): the torso is 8 deg more upright, so its centre lies further forward

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "common/file_util.h"
 #include "common/paths.h"
 
 namespace perch {
@@ -196,10 +197,6 @@ TEST(Recipe, StateFileRoundTripsAndRefusesCorruption) {
     out << "{\"format\": \"perch";
   }
   EXPECT_THROW(LoadRecipeState(dir), ConfigError);
-}
-
-TEST(Recipe, Sha256OfKnownBytes) {
-  EXPECT_EQ(Sha256HexOf("abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
 }
 
 // The delivered recipe file is valid, reads no path under models/, and each training stage has

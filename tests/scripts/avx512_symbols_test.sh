@@ -1,5 +1,5 @@
 #!/bin/bash
-# The AVX-512 dense kernels (learner/dense_kernels_avx512.cc) are compiled with -march=x86-64-v4
+# The AVX-512 dense kernels (policy/dense_kernels_avx512.cc) are compiled with -march=x86-64-v4
 # into the same program as portable code. Any symbol they define that the linker could merge with
 # another object's copy (weak template instantiations, inline functions) would let AVX-512 code
 # run on CPUs without it. Checks that the object's global and weak definitions are only the entry

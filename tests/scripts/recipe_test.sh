@@ -58,7 +58,12 @@ assert w['samples']>=32000, w   # 0.002 x 16.5 M = 33,000: the budget, counted a
 assert w['figures']['stop_reason']=='max_samples', w" || fail "A: walk1 after resume"
 grep -q -- "--resume" "$A/walk1/stage.log" || fail "A: the second attempt did not resume"
 grep -q "resum" "$A/walk1/stage.log" || fail "A: the learner did not say it resumed"
-[ -f "$first" ] || true
+# It continued from a checkpoint that was there when it was killed (or a newer one), not from 0.
+resumed=$(grep -o "resumed from [^ ]*ckpt-[0-9]*" "$A/walk1/stage.log" | head -1 | grep -o "[0-9]*$")
+[ -n "$resumed" ] || fail "A: the stage log names no checkpoint it resumed from"
+first_update=$(basename "$first" .bin | sed 's/^ckpt-//')
+[ $((10#$resumed)) -ge $((10#$first_update)) ] ||
+  fail "A: resumed from update $resumed, older than the checkpoint $first left by the killed run"
 
 # ---- B: the whole recipe at toy scale, killed in a training stage, resumed -------------------
 B=$tmp/b

@@ -15,7 +15,6 @@
 #include "tasks/meta_eval.h"
 #include "tasks/model_source.h"
 #include "tasks/recording.h"
-#include "viz/canvas.h"
 
 namespace perch {
 namespace {
@@ -121,7 +120,9 @@ TEST(MetaEnv, OneStepRunsThePeriodWithTheChosenSubtaskAndPaysEq8) {
   const double d0 = env.humanoid().PelvisSeatDistance();
   std::vector<float> a{1.0f, 0.3f, 2.0f};  // class 1 = right turn
   const StepResult r = env.Step(a.data(), obs.data());
-  if (!r.terminated) EXPECT_EQ(steps, 30);
+  if (!r.terminated) {
+    EXPECT_EQ(steps, 30);
+  }
   EXPECT_EQ(last_active, kRightTurn);
   ASSERT_FALSE(env.episode().sequence.empty());
   EXPECT_EQ(env.episode().sequence[0], kRightTurn);
@@ -366,9 +367,6 @@ TEST(MetaEval, DeterministicOverThreadsAndCountsEveryTrial) {
   EXPECT_NEAR(falls, 6 * one["fall_rate"].get<double>(), 1e-9);
   EXPECT_GE(fail.trial, 0);
   EXPECT_FALSE(fail.frames.empty());
-  const std::string png = ::testing::TempDir() + "/matrix.png";
-  SaveTransitionMatrixPng(one, png);
-  EXPECT_GT(Canvas::LoadPng(png).width(), 500);
 }
 
 TEST(MetaEval, SavesTheStateAtEveryHandOverAndTheFailedTrialsOnes) {
@@ -433,7 +431,9 @@ TEST(MetaEval, SavesTheHandOversToTheSubtaskItIsAskedFor) {
     EXPECT_EQ(static_cast<int>(all.size()), runs) << SubtaskName(sub);
     EXPECT_NE(runs, HandOversTo(r, "sit")) << "the test cannot tell the subtasks apart";
     // The walker's hand-backs: its runs from the spawn are not among them.
-    if (sub == kWalk) EXPECT_GT(RunsOf(r, "walk"), runs);
+    if (sub == kWalk) {
+      EXPECT_GT(RunsOf(r, "walk"), runs);
+    }
   }
 }
 
@@ -481,7 +481,9 @@ TEST(MetaEnv, LoadsTheConfiguredSubtasksAndTheWalkerWalksToATarget) {
         break;
       }
     }
-    if (env.episode().control_steps == 240) EXPECT_LT(env.episode().min_dist_m, 6.0);
+    if (env.episode().control_steps == 240) {
+      EXPECT_LT(env.episode().min_dist_m, 6.0);
+    }
   }
   EXPECT_LE(falls, 3);
 }
@@ -781,10 +783,14 @@ TEST(MetaEval, StartRoutesAreRecordedAndTheTrialTakesTheBest) {
     for (const MetaTrialRecord::Route& route : r.routes) {
       any = any || route.success;
       if (route.success) sooner = std::min(sooner, route.success_step);
-      if (route.success) EXPECT_FALSE(route.fell);
+      if (route.success) {
+        EXPECT_FALSE(route.fell);
+      }
     }
     EXPECT_EQ(r.success, any);
-    if (any) EXPECT_NEAR(r.time_to_sit_s, sooner * dt, 1e-9);
+    if (any) {
+      EXPECT_NEAR(r.time_to_sit_s, sooner * dt, 1e-9);
+    }
   }
   EXPECT_EQ(j["lookahead"]["rollouts_per_trial"].get<double>(), 4.0);
   // Without the option the records hold no routes.

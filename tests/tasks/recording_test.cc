@@ -70,15 +70,16 @@ TEST(Recording, RecordingDoesNotChangeTheEpisodesAndHoldsTheSimulatorsPoses) {
       reward_sum += f.reward();
       // Every body where forward kinematics of the recorded root and joint angles puts it.
       const Eigen::Vector3d root(f.body_pos(0), f.body_pos(1), f.body_pos(2));
-      const Eigen::Quaterniond rq(f.body_quat(0), f.body_quat(1), f.body_quat(2),
-                                  f.body_quat(3));
+      const Eigen::Quaterniond rq(f.body_quat(0), f.body_quat(1), f.body_quat(2), f.body_quat(3));
       std::vector<double> q(f.q().begin(), f.q().end());
       const FkResult fk = ForwardKinematics(model, root, rq.normalized(), q.data());
       for (int b = 0; b < 13; ++b) {
         const Eigen::Vector3d p(f.body_pos(3 * b), f.body_pos(3 * b + 1), f.body_pos(3 * b + 2));
         EXPECT_LT((p - fk.body_world[b].translation()).norm(), 2e-3) << b << " step " << f.step();
       }
-      if (f.step() > 0) EXPECT_TRUE(f.reward_terms().count("pose")) << f.step();
+      if (f.step() > 0) {
+        EXPECT_TRUE(f.reward_terms().count("pose")) << f.step();
+      }
     }
     EXPECT_NE(reward_sum, 0.0);
   }

@@ -13,9 +13,9 @@
 #include <vector>
 
 #include "common/proto/model.pb.h"
-#include "learner/policy.h"
 #include "learner/ppo.h"
-#include "learner/service/security.h"
+#include "policy/policy.h"
+#include "protocol/security.h"
 
 namespace perch {
 namespace {

@@ -1,0 +1,94 @@
+#include "experiment/mock_env.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace perch {
+
+Json ToJson(const MockEnvConfig& c) {
+  return Json{{"act_dim", c.act_dim},
+              {"noise_dims", c.noise_dims},
+              {"episode_steps", c.episode_steps},
+              {"fail_distance", c.fail_distance},
+              {"reward_scale", c.reward_scale},
+              {"work_iterations", c.work_iterations}};
+}
+
+MockEnvConfig MockEnvConfigFromJson(const Json& j, const std::string& ctx) {
+  CheckKnownKeys(j,
+                 {"act_dim", "noise_dims", "episode_steps", "fail_distance", "reward_scale",
+                  "work_iterations"},
+                 ctx);
+  MockEnvConfig c;
+  GetOptional(j, "act_dim", c.act_dim, ctx);
+  GetOptional(j, "noise_dims", c.noise_dims, ctx);
+  GetOptional(j, "episode_steps", c.episode_steps, ctx);
+  GetOptional(j, "fail_distance", c.fail_distance, ctx);
+  GetOptional(j, "reward_scale", c.reward_scale, ctx);
+  GetOptional(j, "work_iterations", c.work_iterations, ctx);
+  if (c.act_dim < 1) throw ConfigError(ctx + ".act_dim: must be >= 1");
+  if (c.noise_dims < 0) throw ConfigError(ctx + ".noise_dims: must be >= 0");
+  if (c.episode_steps < 1) throw ConfigError(ctx + ".episode_steps: must be >= 1");
+  if (c.work_iterations < 0) throw ConfigError(ctx + ".work_iterations: must be >= 0");
+  return c;
+}
+
+MockEnv::MockEnv(const MockEnvConfig& config) : config_(config), goal_(config.act_dim) {
+  spec_.name = "mock";
+  spec_.act_dim = config.act_dim;
+  // Observation: goal [act_dim], previous clipped action [act_dim], noise [noise_dims].
+  spec_.obs_dim = 2 * config.act_dim + config.noise_dims;
+  spec_.obs_low.assign(spec_.obs_dim, -5.0f);
+  spec_.obs_high.assign(spec_.obs_dim, 5.0f);
+  spec_.act_low.assign(spec_.act_dim, -1.0f);
+  spec_.act_high.assign(spec_.act_dim, 1.0f);
+  spec_.obs_slices = {{"goal", 0, config.act_dim},
+                      {"last_action", config.act_dim, config.act_dim},
+                      {"noise", 2 * config.act_dim, config.noise_dims}};
+  spec_.max_episode_steps = config.episode_steps;
+}
+
+void MockEnv::Observe(const float* last_action, float* obs) {
+  const int a = config_.act_dim;
+  for (int i = 0; i < a; ++i) {
+    obs[i] = goal_[i];
+    obs[a + i] = last_action ? last_action[i] : 0.0f;
+  }
+  for (int i = 0; i < config_.noise_dims; ++i) obs[2 * a + i] = static_cast<float>(rng_.Normal());
+}
+
+void MockEnv::Reset(float* obs) {
+  for (float& g : goal_) g = static_cast<float>(rng_.Uniform(-1.0, 1.0));
+  t_ = 0;
+  Observe(nullptr, obs);
+}
+
+StepResult MockEnv::Step(const float* action, float* obs) {
+  StepResult r;
+  std::vector<float> clipped(config_.act_dim);
+  double err2 = 0.0;
+  bool finite = true;
+  for (int i = 0; i < config_.act_dim; ++i) {
+    finite = finite && std::isfinite(action[i]);
+    clipped[i] = std::clamp(action[i], -1.0f, 1.0f);
+    const double d = action[i] - goal_[i];  // unclipped: far-off actions "fall"
+    err2 += d * d;
+  }
+  // Emulated physics cost; volatile so that the loop is not optimised away.
+  volatile double sink = 0.0;
+  for (int k = 0; k < config_.work_iterations; ++k) sink = sink + std::sqrt(k + 1.0);
+  double clip_err2 = 0.0;
+  for (int i = 0; i < config_.act_dim; ++i) {
+    const double d = clipped[i] - goal_[i];
+    clip_err2 += d * d;
+  }
+  ++t_;
+  r.reward = static_cast<float>(config_.reward_scale * (1.0 - clip_err2 / config_.act_dim));
+  r.invalid = !finite;
+  r.terminated = !finite || std::sqrt(err2) > config_.fail_distance;
+  r.truncated = !r.terminated && t_ >= config_.episode_steps;
+  Observe(clipped.data(), obs);
+  return r;
+}
+
+}  // namespace perch
