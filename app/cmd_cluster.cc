@@ -30,6 +30,7 @@
 #include "common/config_file.h"
 #include "common/stop_signal.h"
 #include "experiment/experiment.h"
+#include "launch/local_training.h"
 #include "learner/service/checkpoint.h"
 #include "learner/service/learner.h"
 #include "learner/service/learner_setup.h"
@@ -299,235 +300,29 @@ struct TrainFlags {
   int metrics_port = 9100;
 };
 
-std::vector<std::string> LearnerArgv(const TrainFlags& f, bool resume) {
-  std::vector<std::string> a = {
-      SelfExe(),        "learner",
-      "--config",       f.config,
-      "--run-dir",      f.run_dir,
-      "--rollout-bind", "tcp://127.0.0.1:" + std::to_string(f.rollout_port),
-      "--weights-bind", "tcp://127.0.0.1:" + std::to_string(f.weights_port),
-      "--metrics-port", std::to_string(f.metrics_port)};
-  if (resume) a.push_back("--resume");
-  for (const std::string& s : f.overrides.All()) {
-    a.push_back("--set");
-    a.push_back(s);
-  }
-  if (f.max_updates > 0) {
-    a.push_back("--max-updates");
-    a.push_back(std::to_string(f.max_updates));
-  }
-  return a;
-}
-
-std::vector<std::string> ActorArgv(const TrainFlags& f, int id) {
-  std::vector<std::string> a = {SelfExe(),        "actor",
-                                "--config",       f.config,
-                                "--learner-host", "127.0.0.1",
-                                "--rollout-port", std::to_string(f.rollout_port),
-                                "--weights-port", std::to_string(f.weights_port),
-                                "--actor-id",     std::to_string(id)};
-  // The actors build the same env as the learner: the same overrides.
-  for (const std::string& s : f.overrides.sets) {
-    a.push_back("--set");
-    a.push_back(s);
-  }
-  if (f.envs > 0) {
-    a.push_back("--envs");
-    a.push_back(std::to_string(f.envs));
-  }
-  return a;
-}
-
-int RunTrain(TrainFlags f) {
+int RunTrain(const TrainFlags& f) {
   if (f.actors < 1) throw ConfigError("--actors: must be >= 1");
   if (f.envs < 0 || f.envs > 1024) throw ConfigError("--envs: must be in 1..1024");
   if (f.max_updates < 0) throw ConfigError("--max-updates: must be >= 0");
   CheckPort(f.rollout_port, "--rollout-port");
   CheckPort(f.weights_port, "--weights-port");
   CheckPort(f.metrics_port, "--metrics-port");
-  const ExperimentConfig cfg = LoadExperimentConfig(f.config, f.overrides.All());
   CheckDistinctEndpoints({{"--rollout-port", "tcp://h:" + std::to_string(f.rollout_port)},
                           {"--weights-port", "tcp://h:" + std::to_string(f.weights_port)},
                           {"--metrics-port", "tcp://h:" + std::to_string(f.metrics_port)}});
-  // The learner would refuse these only after the actors started.
-  CheckRunTimeConfig(MakeLearnerSetup(cfg));
-  if (f.run_dir.empty()) {
-    std::string base = f.config.substr(f.config.rfind('/') + 1);
-    base = base.substr(0, base.rfind('.'));
-    f.run_dir = "runs/" + base;
-  }
-  // Refuse early (as the learner would) rather than start actors for nothing.
-  CheckpointStore store(f.run_dir, cfg.cluster.keep_last, cfg.cluster.milestone_every);
-  if (!f.resume && !store.List().empty()) {
-    throw ConfigError("--run-dir " + f.run_dir +
-                      ": holds checkpoints; pass --resume to continue or choose another --run-dir");
-  }
-  LogToStderr("train");
-  InstallStopHandlers();
-  const std::string logs = f.run_dir + "/logs";
-  std::error_code ec;
-  std::filesystem::create_directories(logs, ec);  // runs/ may not exist yet on a fresh clone
-  if (ec) throw ConfigError("--run-dir " + f.run_dir + ": cannot create it: " + ec.message());
-  // Members only, on loopback too: a run without keys of its own makes them in its run dir (a
-  // resumed run reuses them) and hands them to its learner and actors.
-  if (const std::string keys = EnsureLocalKeys(cfg.cluster, f.run_dir + "/keys"); !keys.empty()) {
-    spdlog::info("train: CURVE keys in {}", keys);
-  }
-  spdlog::info("train: learner + {} actors on loopback, run dir {}, logs in {}", f.actors,
-               f.run_dir, logs);
-  RestartPolicyConfig rpc;
-  rpc.base_s = cfg.cluster.restart_backoff_ms / 1000.0;
-  rpc.max_s = cfg.cluster.restart_backoff_max_ms / 1000.0;
-  rpc.give_up_after = cfg.cluster.max_identical_failures;
-  RestartPolicy learner_policy(rpc);
-  std::vector<RestartPolicy> actor_policy(f.actors, RestartPolicy(rpc));
-  pid_t learner = Spawn(LearnerArgv(f, f.resume), "");
-  learner_policy.OnStart(MonotonicSeconds());
-  double learner_restart_at = -1.0;  // >= 0: a restart is due then
-  std::vector<pid_t> actors(f.actors, -1);
-  std::vector<double> restart_at(f.actors, 0.0);
-  std::vector<bool> gave_up(f.actors, false);
-  for (int i = 0; i < f.actors; ++i) {
-    actors[i] = Spawn(ActorArgv(f, i), logs + "/actor-" + std::to_string(i) + ".log");
-    actor_policy[i].OnStart(MonotonicSeconds());
-  }
-  int exit_code = 0;
-  // Watchdog: the learner's metrics.jsonl grows by a line per update.
-  const std::string metrics_path = f.run_dir + "/metrics.jsonl";
-  auto metrics_size = [&] {
-    std::error_code e;
-    const auto n = std::filesystem::file_size(metrics_path, e);
-    return e ? uintmax_t{0} : n;
-  };
-  uintmax_t last_size = metrics_size();
-  // Restart counts for the learner's /metrics (perch_*_restarts_total) and for operators.
-  auto write_restarts = [&] {
-    int actor_restarts = 0, given_up = 0;
-    for (int i = 0; i < f.actors; ++i) {
-      actor_restarts += actor_policy[i].restarts();
-      given_up += gave_up[i];
-    }
-    try {
-      SaveJsonFileAtomic(f.run_dir + "/launcher.json",
-                         Json{{"learner_restarts", learner_policy.restarts()},
-                              {"actor_restarts", actor_restarts},
-                              {"actors_given_up", given_up}});
-    } catch (const std::exception& e) {
-      spdlog::warn("train: cannot write {}/launcher.json: {}", f.run_dir, e.what());
-    }
-  };
-  write_restarts();
-  double last_progress = MonotonicSeconds(), last_watch = 0.0, last_stall_warning = -1e9;
-  bool stopped_warned = false;
-  while (!StopFlag().load()) {
-    int status = 0;
-    const pid_t pid = ::waitpid(-1, &status, WNOHANG);
-    const double now = MonotonicSeconds();
-    if (pid > 0 && pid == learner) {
-      if (WIFEXITED(status) && (WEXITSTATUS(status) == 0 || WEXITSTATUS(status) == 2)) {
-        exit_code = WEXITSTATUS(status);
-        spdlog::info("train: learner {}; stopping actors", DescribeStatus(status));
-        learner = -1;
-        break;
-      }
-      learner = -1;
-      const double delay = learner_policy.OnFailure(DescribeStatus(status), now);
-      if (delay < 0) {
-        spdlog::error(
-            "train: learner {} {} times in a row; giving up (its output is above; "
-            "cluster.max_identical_failures)",
-            DescribeStatus(status), learner_policy.identical_in_a_row());
-        exit_code = 1;
-        break;
-      }
-      spdlog::error(
-          "train: learner {}; restarting it with --resume in {:.1f} s (failure {} in a row)",
-          DescribeStatus(status), delay, learner_policy.failures_in_a_row());
-      learner_restart_at = now + delay;
-    } else if (pid > 0) {
-      for (int i = 0; i < f.actors; ++i) {
-        if (actors[i] != pid) continue;
-        actors[i] = -1;
-        const std::string log = logs + "/actor-" + std::to_string(i) + ".log";
-        const double delay = actor_policy[i].OnFailure(DescribeStatus(status), now);
-        if (delay < 0) {
-          gave_up[i] = true;
-          spdlog::error(
-              "train: actor {} {} {} times in a row; not restarting it (cluster."
-              "max_identical_failures). The end of {}:\n{}",
-              i, DescribeStatus(status), actor_policy[i].identical_in_a_row(), log,
-              LastLines(log, 10));
-        } else {
-          spdlog::warn("train: actor {} {}; restarting it in {:.1f} s", i, DescribeStatus(status),
-                       delay);
-          restart_at[i] = now + delay;
-        }
-      }
-    }
-    if (learner < 0 && learner_restart_at >= 0 && now >= learner_restart_at) {
-      learner = Spawn(LearnerArgv(f, true), "");
-      learner_policy.OnStart(now);
-      learner_restart_at = -1.0;
-      write_restarts();
-    }
-    int alive_or_due = 0;
-    for (int i = 0; i < f.actors; ++i) {
-      if (actors[i] < 0 && !gave_up[i] && now >= restart_at[i]) {
-        actors[i] = Spawn(ActorArgv(f, i), logs + "/actor-" + std::to_string(i) + ".log");
-        actor_policy[i].OnStart(now);
-        write_restarts();
-      }
-      alive_or_due += !gave_up[i];
-    }
-    if (alive_or_due == 0) {
-      spdlog::error("train: every actor failed {} times in a row; stopping the run",
-                    rpc.give_up_after);
-      exit_code = 1;
-      break;
-    }
-    if (now - last_watch >= 1.0 && learner > 0) {
-      last_watch = now;
-      const uintmax_t size = metrics_size();
-      if (size != last_size) {
-        last_size = size;
-        last_progress = now;
-      }
-      const char state = ProcessState(learner);
-      if (state == 'T' && !stopped_warned) {
-        spdlog::warn(
-            "train: the learner (pid {}) is stopped (SIGSTOP?): no training until it "
-            "gets SIGCONT",
-            learner);
-        stopped_warned = true;
-      } else if (state != 'T') {
-        stopped_warned = false;
-      }
-      const double w = cfg.cluster.learner_watchdog_s;
-      if (w > 0 && now - last_progress >= w && now - last_stall_warning >= w) {
-        spdlog::warn(
-            "train: no update from the learner for {:.0f} s (pid {}, state {}); actors alive: {} "
-            "(cluster.learner_watchdog_s)",
-            now - last_progress, learner, state,
-            std::count_if(actors.begin(), actors.end(), [](pid_t a) { return a > 0; }));
-        last_stall_warning = now;
-      }
-    }
-    if (pid <= 0) std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
-  // Ctrl-C / SIGTERM: the learner writes its final checkpoint on SIGTERM.
-  if (learner > 0) {
-    ::kill(learner, SIGTERM);
-    const int st = Stop(learner, 60.0);
-    spdlog::info("train: learner {}", DescribeStatus(st));
-  }
-  for (pid_t a : actors) {
-    if (a > 0) ::kill(a, SIGTERM);
-  }
-  for (pid_t a : actors) {
-    if (a > 0) Stop(a, 10.0);
-  }
-  spdlog::info("train: stopped");
-  return exit_code;
+  LocalTrainingOptions o;
+  o.config = f.config;
+  o.learner_sets = f.overrides.All();
+  o.actor_sets = f.overrides.sets;
+  o.actors = f.actors;
+  o.envs = f.envs;
+  o.run_dir = f.run_dir;
+  o.resume = f.resume;
+  o.max_updates = f.max_updates;
+  o.rollout_port = f.rollout_port;
+  o.weights_port = f.weights_port;
+  o.metrics_port = f.metrics_port;
+  return RunLocalTraining(o);
 }
 
 }  // namespace

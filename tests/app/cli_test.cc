@@ -215,7 +215,7 @@ TEST_F(CliTest, MetaEvalSavesItsHandOversToSitAsABankTheSitStartsFrom) {
   EXPECT_EQ(states, j["handover_values"]["sit"]["runs"].get<int>());
   // The sit starts from it (its clip kept where the hand-over put the body).
   r = Perch("eval --model " + src + "/models/sit_from_plan3/policy.bin --config " + src +
-                "/configs/sit_from_plan2.json --start end-poses --bank " + bank +
+                "/configs/experiments/sit_from_plan2.json --start end-poses --bank " + bank +
                 " --episodes 2 --seed 1 --json",
             false);
   ASSERT_EQ(r.code, 0) << r.out;
@@ -241,9 +241,10 @@ TEST_F(CliTest, MetaEvalLooksAheadForAMetaPolicyOnlyWhenAsked) {
     EXPECT_NE(r.code, 0) << args;
     EXPECT_TRUE(Has(r.out, why)) << args << "\n" << r.out;
   };
-  expect_refused("eval --task sit_chair --planner --config " + src +
-                     "/configs/meta_zone1_plan5_30hz.json --trials 2 --lookahead-delays-s 0.3",
-                 "for a meta policy; the planner's lookahead is its config's");
+  expect_refused(
+      "eval --task sit_chair --planner --config " + src +
+          "/configs/experiments/meta_zone1_plan5_30hz.json --trials 2 --lookahead-delays-s 0.3",
+      "for a meta policy; the planner's lookahead is its config's");
   expect_refused(policy + "--lookahead-delays-s -1", "--lookahead-delays-s");
   // Its rollouts take the policy's mean action, so a sampling policy is refused.
   expect_refused(policy + "--stochastic --lookahead-delays-s 0.5", "needs its mean action");
@@ -307,8 +308,8 @@ TEST_F(CliTest, MetaEvalLooksAheadForAMetaPolicyOnlyWhenAsked) {
   expect_refused(policy + "--lookahead " + dir + "missing.json", "missing.json: cannot open");
   // The shipped files are lookaheads (configs/lookahead/; 8x3 is stop 41's).
   expect_refused("eval --task sit_chair --planner --config " + src +
-                     "/configs/meta_zone1_plan5_30hz.json --trials 2 --lookahead " + src +
-                     "/configs/lookahead/8x3.json",
+                     "/configs/experiments/meta_zone1_plan5_30hz.json --trials 2 --lookahead " +
+                     src + "/configs/lookahead/8x3.json",
                  "for a meta policy; the planner's lookahead is its config's");
 }
 

@@ -25,6 +25,8 @@ may_include = {
     'learner/local': ['common', 'envs', 'motion', 'policy', 'protocol', 'tasks', 'learner'],
     'learner/service': ['common', 'policy', 'protocol', 'experiment', 'learner'],
     'actor': ['common', 'envs', 'motion', 'policy', 'protocol', 'tasks', 'experiment'],
+    'launch': ['common', 'envs', 'motion', 'policy', 'protocol', 'tasks', 'experiment', 'learner',
+               'learner/service', 'actor'],
     'bench': ['common', 'envs', 'motion', 'policy', 'protocol', 'tasks', 'experiment', 'learner',
               'learner/service', 'actor'],
     'recipe': ['common', 'actor'],
