@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <set>
 
@@ -43,6 +44,15 @@ void CheckKnownKeys(const Json& j, std::initializer_list<const char*> known,
     bool ok = false;
     for (const char* k : known) ok = ok || it.key() == k;
     if (!ok) throw ConfigError(ctx + ": unknown field '" + it.key() + "'");
+  }
+}
+
+void CheckKnownKeys(const Json& j, const std::vector<std::string>& known, const std::string& ctx) {
+  if (!j.is_object()) throw ConfigError(ctx + ": expected an object, got " + j.dump());
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    if (std::find(known.begin(), known.end(), it.key()) == known.end()) {
+      throw ConfigError(ctx + ": unknown field '" + it.key() + "'");
+    }
   }
 }
 

@@ -4,12 +4,11 @@
 #include <cstdint>
 #include <initializer_list>
 #include <limits>
+#include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
 #include <type_traits>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 namespace perch {
 
@@ -30,7 +29,9 @@ Json LoadJsonFile(const std::string& path);
 void SaveJsonFileAtomic(const std::string& path, const Json& j);
 
 // Throws ConfigError "CTX: unknown field 'x'" if `j` has a key outside `known`.
-void CheckKnownKeys(const Json& j, std::initializer_list<const char*> known, const std::string& ctx);
+void CheckKnownKeys(const Json& j, std::initializer_list<const char*> known,
+                    const std::string& ctx);
+void CheckKnownKeys(const Json& j, const std::vector<std::string>& known, const std::string& ctx);
 
 // Reads j[key] into out when present (defaults stay otherwise). A wrong type throws
 // ConfigError "CTX.key: expected <type>, got <json>". Integers are strict (issue 17): a
@@ -51,7 +52,8 @@ void GetOptional(const Json& j, const char* key, T& out, const std::string& ctx)
     } else if (it->is_number_integer()) {
       const int64_t v = it->template get<int64_t>();
       if (v < static_cast<int64_t>(std::numeric_limits<T>::min()) ||
-          (v > 0 && static_cast<uint64_t>(v) > static_cast<uint64_t>(std::numeric_limits<T>::max()))) {
+          (v > 0 &&
+           static_cast<uint64_t>(v) > static_cast<uint64_t>(std::numeric_limits<T>::max()))) {
         fail(std::is_unsigned_v<T> ? "a non-negative integer in range" : "an integer in range");
       }
       out = static_cast<T>(v);

@@ -3,6 +3,8 @@
 #include <cmath>
 #include <cstdlib>
 
+#include "common/subtasks.h"
+
 namespace perch {
 
 Json ToJson(const ClusterConfig& c) {
@@ -178,27 +180,19 @@ ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
 }
 
 proto::Task TaskFromName(const std::string& name, const std::string& ctx) {
-  if (name == "walk") return proto::TASK_WALK;
-  // The env's task names (turn_left, turn_right); the older left_turn / right_turn still read.
-  if (name == "turn_left" || name == "left_turn") return proto::TASK_LEFT_TURN;
-  if (name == "turn_right" || name == "right_turn") return proto::TASK_RIGHT_TURN;
-  if (name == "sit") return proto::TASK_SIT;
+  if (const int id = SubtaskIdOf(name); id >= 0) return Subtasks()[id].wire;
+  // The older left_turn / right_turn still read.
+  if (name == "left_turn") return proto::TASK_LEFT_TURN;
+  if (name == "right_turn") return proto::TASK_RIGHT_TURN;
   if (name == "meta") return proto::TASK_META;
   if (name == "stand") return proto::TASK_STAND;
-  throw ConfigError(ctx + ": unknown task '" + name +
-                    "' (walk, turn_left, turn_right, sit, meta, stand)");
+  throw ConfigError(ctx + ": unknown task '" + name + "' (" + SubtaskNamesJoined() +
+                    ", meta, stand)");
 }
 
 std::string TaskName(proto::Task task) {
+  if (const int id = SubtaskIdOfWire(task); id >= 0) return SubtaskName(id);
   switch (task) {
-    case proto::TASK_WALK:
-      return "walk";
-    case proto::TASK_LEFT_TURN:
-      return "turn_left";
-    case proto::TASK_RIGHT_TURN:
-      return "turn_right";
-    case proto::TASK_SIT:
-      return "sit";
     case proto::TASK_META:
       return "meta";
     case proto::TASK_STAND:

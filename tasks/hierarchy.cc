@@ -15,27 +15,6 @@
 
 namespace perch {
 
-const char* SubtaskName(int id) {
-  switch (id) {
-    case kLeftTurn:
-      return "turn_left";
-    case kRightTurn:
-      return "turn_right";
-    case kSit:
-      return "sit";
-    case kWalk:
-      return "walk";
-  }
-  return "?";
-}
-
-int SubtaskIdOf(const std::string& name) {
-  for (int id = 0; id < kNumSubtasks; ++id) {
-    if (name == SubtaskName(id)) return id;
-  }
-  return -1;
-}
-
 MetaConfig MetaConfig::FromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
   CheckKnownKeys(j,
@@ -60,7 +39,7 @@ MetaConfig MetaConfig::FromJson(const Json& j, const std::string& ctx) {
     const Json& s = j["subtasks"];
     const std::string sc = ctx + ".subtasks";
     if (!s.is_object()) throw ConfigError(sc + ": expected an object");
-    CheckKnownKeys(s, {"turn_left", "turn_right", "sit", "walk"}, sc);
+    CheckKnownKeys(s, SubtaskNames(), sc);
     for (int id = 0; id < kNumSubtasks; ++id) GetOptional(s, SubtaskName(id), c.subtasks[id], sc);
   }
   if (c.period < 1) throw ConfigError(ctx + ".period: must be >= 1");

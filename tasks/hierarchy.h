@@ -15,6 +15,7 @@
 
 #include "common/json_util.h"
 #include "common/proto/model.pb.h"
+#include "common/subtasks.h"
 #include "envs/humanoid_env.h"
 #include "envs/pose_frame.h"
 #include "policy/policy.h"
@@ -25,10 +26,7 @@
 
 namespace perch {
 
-// The authors' subtask indices of the meta switch (alphabetical keys, notes 4.7).
-enum SubtaskId { kLeftTurn = 0, kRightTurn = 1, kSit = 2, kWalk = 3, kNumSubtasks = 4 };
-const char* SubtaskName(int id);           // "turn_left", "turn_right", "sit", "walk"
-int SubtaskIdOf(const std::string& name);  // -1 when unknown
+// SubtaskId, SubtaskName, SubtaskIdOf: the subtasks' one table, common/subtasks.h.
 
 // The meta controller's view of the hierarchy (paper Sec. 5; notes 4.7): which subtasks its switch
 // chooses from, which frozen checkpoints run them, and how often it decides.

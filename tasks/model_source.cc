@@ -5,6 +5,7 @@
 
 #include "common/file_util.h"
 #include "common/proto/wire.pb.h"
+#include "common/subtasks.h"
 #include "tasks/state_bank.h"
 
 namespace perch {
@@ -112,14 +113,10 @@ std::vector<FrozenPolicyData> FrozenPoliciesIn(const std::string& model_path) {
   std::vector<FrozenPolicyData> out;
   for (const proto::TaskPolicy& p : c.weights().policies()) {
     if (!p.frozen()) continue;
-    const int id = p.task() == proto::TASK_LEFT_TURN    ? 0
-                   : p.task() == proto::TASK_RIGHT_TURN ? 1
-                   : p.task() == proto::TASK_SIT        ? 2
-                   : p.task() == proto::TASK_WALK       ? 3
-                                                        : -1;
+    const int id = SubtaskIdOfWire(p.task());
     if (id < 0) throw ConfigError(file + ": a frozen policy of an unknown subtask");
-    static const char* kNames[] = {"turn_left", "turn_right", "sit", "walk"};
-    out.push_back({kNames[id], p.model().SerializeAsString(), p.saved_config_json(), p.source()});
+    out.push_back(
+        {SubtaskName(id), p.model().SerializeAsString(), p.saved_config_json(), p.source()});
   }
   return out;
 }

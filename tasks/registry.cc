@@ -1,5 +1,7 @@
 #include "tasks/registry.h"
 
+#include <deque>
+
 #include "common/paths.h"
 #include "envs/chair.h"
 #include "tasks/hierarchy.h"
@@ -164,13 +166,25 @@ TaskDef SitChairDef() {
   return d;
 }
 
-const std::vector<TaskDef>& Registry() {
-  static const std::vector<TaskDef> tasks = {WalkDef(), TurnDef("turn_left"), TurnDef("turn_right"),
-                                             SitDef(), SitChairDef()};
+// A deque: registering a task never moves the others (FindTask hands out pointers).
+std::deque<TaskDef>& Registry() {
+  static std::deque<TaskDef> tasks = {WalkDef(), TurnDef("turn_left"), TurnDef("turn_right"),
+                                      SitDef(), SitChairDef()};
   return tasks;
 }
 
 }  // namespace
+
+void RegisterTask(TaskDef def) {
+  if (def.name.empty() || def.name == "stand" || def.name == "chain") {
+    throw ConfigError("RegisterTask: a task needs a name other than stand and chain");
+  }
+  if (FindTask(def.name) != nullptr) {
+    throw ConfigError("RegisterTask: task \"" + def.name + "\" is registered already");
+  }
+  if (!def.make) throw ConfigError("RegisterTask: task \"" + def.name + "\" has no factory");
+  Registry().push_back(std::move(def));
+}
 
 const TaskDef* FindTask(const std::string& name) {
   for (const TaskDef& d : Registry()) {

@@ -2,12 +2,13 @@
 // EnvPool binds task ids to specs). Per task: its observation layout, whether it needs a chair,
 // how its config section is read and written, its factory and its evaluation. The env factory,
 // `perch train`, `perch eval` and `--check-config` find tasks here; adding a task is its own
-// file plus one entry in registry.cc.
+// file plus one entry in registry.cc (or a TaskRegistration in its own file).
 #pragma once
 
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "common/json_util.h"
@@ -52,6 +53,16 @@ struct TaskDef {
   std::function<Json(const TaskEnvConfig&, const proto::ModelWeights&, const EvalOptions&,
                      EvalRecording*)>
       evaluate;
+};
+
+// Adds a task (ConfigError when its name is taken or empty). A task's own file may register it
+// at start-up, without editing any shared list:
+//   static const TaskRegistration kHoldStill(HoldStillDef());
+// (a file linked into the program directly; one inside a static library is linked only when
+// something else in it is used, so the built-in tasks are listed in registry.cc).
+void RegisterTask(TaskDef def);
+struct TaskRegistration {
+  explicit TaskRegistration(TaskDef def) { RegisterTask(std::move(def)); }
 };
 
 // nullptr when unknown.

@@ -3,13 +3,16 @@
 #include <string>
 #include <vector>
 
+#include "common/subtasks.h"
 #include "viz/canvas.h"
 
 namespace perch {
 
 void SaveTransitionMatrixPng(const Json& result, const std::string& path) {
-  const std::vector<std::string> rows = {"start", "turn_left", "turn_right", "sit", "walk"};
-  const std::vector<std::string> cols = {"turn_left", "turn_right", "sit", "walk", "end"};
+  // Rows: where a run came from (the start or a subtask); columns: what followed.
+  std::vector<std::string> rows = {"start"}, cols = SubtaskNames();
+  for (const std::string& n : SubtaskNames()) rows.push_back(n);
+  cols.push_back("end");
   const int cell = 90, label_w = 110, head_h = 60, gap = 30;
   const std::vector<std::string> sides = {"left", "right"};
   const int panel_w = label_w + cell * static_cast<int>(cols.size());
