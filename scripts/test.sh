@@ -41,6 +41,7 @@ else
   for t in $QUICK; do
     exe=$(find "$ASAN_DIR/tests" -type f -name "$t" -perm -u+x | head -1)
     [ -n "$exe" ] || { echo "test.sh: no $t in $ASAN_DIR" >&2; exit 1; }
+    exe=$(realpath "$exe")  # the test runs in its own folder (its data paths are relative)
     echo "== sanitizers (ASan + UBSan): $t"
     (cd "$(dirname "$exe")" && "$exe" --gtest_brief=1)
   done
