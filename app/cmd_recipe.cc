@@ -26,6 +26,10 @@ void RegisterRecipeCommands(CLI::App& root, CLI::App& /*bench*/) {
   run->add_option("--force-from", f->force_from,
                   "redo this stage and every later one that ran (their files move to "
                   "DIR/superseded/): accepts a changed stage");
+  run->add_option("--extend", f->extend,
+                  "accept a training stage's larger budget (cluster.max_samples; learning rates "
+                  "past the samples it trained may change too): it continues from its newest "
+                  "checkpoint, and the stages that read it are redone (files to DIR/superseded/)");
   run->add_option("--set", f->options.sets,
                   "override a field of every stage's config: section.field=VALUE (repeatable)");
   run->add_option("--scale", f->options.scale,

@@ -419,4 +419,100 @@ std::vector<std::string> InvalidatedStages(const Recipe& r, const RecipeState& s
   return out;
 }
 
+std::vector<std::string> StagesReading(const Recipe& r, const std::string& name) {
+  std::set<std::string> reached{name};
+  std::vector<std::string> out;
+  for (const RecipeStage& st : r.stages) {
+    for (const std::string& d : st.deps) {
+      if (reached.count(d) && !reached.count(st.name)) {
+        reached.insert(st.name);
+        out.push_back(st.name);
+      }
+    }
+  }
+  return out;
+}
+
+namespace {
+
+// "section.field" -> value; arrays are values (an lr_schedule is compared whole).
+void Flatten(const Json& j, const std::string& prefix, std::map<std::string, Json>* out) {
+  if (j.is_object()) {
+    for (auto it = j.begin(); it != j.end(); ++it) {
+      Flatten(it.value(), prefix.empty() ? it.key() : prefix + "." + it.key(), out);
+    }
+  } else {
+    (*out)[prefix] = j;
+  }
+}
+
+// The learning rate at `samples` as the learner reads it (protocol/ppo_config.cc
+// LearningRateAt): ppo.learning_rate, then each [from, rate] of ppo.lr_schedule from `from` on.
+double RateAt(const std::map<std::string, Json>& c, int64_t samples) {
+  auto lr = c.find("ppo.learning_rate");
+  double rate = lr != c.end() && lr->second.is_number() ? lr->second.get<double>() : 0.0;
+  auto sched = c.find("ppo.lr_schedule");
+  if (sched != c.end() && sched->second.is_array()) {
+    for (const Json& e : sched->second) {
+      if (e.is_array() && e.size() == 2 && e[0].is_number() && samples >= e[0].get<double>()) {
+        rate = e[1].get<double>();
+      }
+    }
+  }
+  return rate;
+}
+
+std::vector<int64_t> Breakpoints(const std::map<std::string, Json>& c) {
+  std::vector<int64_t> out;
+  auto sched = c.find("ppo.lr_schedule");
+  if (sched == c.end() || !sched->second.is_array()) return out;
+  for (const Json& e : sched->second) {
+    if (e.is_array() && e.size() == 2 && e[0].is_number()) {
+      out.push_back(static_cast<int64_t>(std::ceil(e[0].get<double>())));
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+std::string ExtensionMismatch(const Json& prev, const Json& next, int64_t samples) {
+  std::map<std::string, Json> a, b;
+  Flatten(prev, "", &a);
+  Flatten(next, "", &b);
+  std::set<std::string> keys;
+  for (const auto& [k, v] : a) keys.insert(k);
+  for (const auto& [k, v] : b) keys.insert(k);
+  for (const std::string& k : keys) {
+    auto x = a.find(k);
+    auto y = b.find(k);
+    const Json vx = x == a.end() ? Json() : x->second;
+    const Json vy = y == b.end() ? Json() : y->second;
+    if (vx == vy || k == "ppo.learning_rate" || k == "ppo.lr_schedule") continue;
+    if (k == "cluster.max_samples") {
+      if (!vy.is_number_integer() || vy.get<int64_t>() < samples) {
+        return "its new budget (cluster.max_samples " + vy.dump() + ") is below the " +
+               std::to_string(samples) + " samples it has trained";
+      }
+      continue;
+    }
+    return k + " changed (" + vx.dump() + " -> " + vy.dump() + ")";
+  }
+  // The rate is piecewise constant: equal at 0 and at every breakpoint below `samples` means
+  // equal on the whole of [0, samples).
+  std::vector<int64_t> at{0};
+  for (int64_t p : Breakpoints(a)) at.push_back(p);
+  for (int64_t p : Breakpoints(b)) at.push_back(p);
+  for (int64_t p : at) {
+    if (p >= samples) continue;
+    const double ra = RateAt(a, p), rb = RateAt(b, p);
+    if (ra != rb) {
+      return "the learning rate at " + std::to_string(p) + " samples changed (" +
+             Json(ra).dump() + " -> " + Json(rb).dump() + "), before the " +
+             std::to_string(samples) + " samples it has trained";
+    }
+  }
+  return "";
+}
+
 }  // namespace perch

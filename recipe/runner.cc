@@ -227,6 +227,8 @@ class Runner {
                 const std::string& stdout_path, Live* live, const std::string& run_dir,
                 int* status);
   void Train(const RecipeStage& s, Live* live, StageRecord* rec);
+  void Extend(const std::string& name);
+  void MoveAside(const std::vector<std::string>& names);
   void Other(const RecipeStage& s, Live* live, StageRecord* rec);
 
   RecipeRunFlags f_;
@@ -442,6 +444,9 @@ void Runner::Train(const RecipeStage& s, Live* live, StageRecord* rec) {
     figures[s.select.metric] = best;
   }
   figures["chosen"] = fs::path(chosen).filename().string();
+  if (rec->figures.contains("extended_from_samples")) {
+    figures["extended_from_samples"] = rec->figures["extended_from_samples"];
+  }
   WriteFileAtomic(sd + "/" + StageOutputs(s).at("policy"), ReadFileBytes(chosen));
   rec->figures = figures;
 }
@@ -617,6 +622,74 @@ void Runner::Progress() {
             << Duration(eta_total) << "\n";
 }
 
+void Runner::MoveAside(const std::vector<std::string>& names) {
+  std::error_code ec;
+  const std::string old = dir_ + "/superseded/" + UtcStamp();
+  fs::create_directories(old, ec);
+  for (const std::string& n : names) {
+    std::cerr << "[recipe] " << n << ": redone (its files move to " << old << "/" << n << ")\n";
+    if (fs::exists(StageDir(n))) fs::rename(StageDir(n), old + "/" + n, ec);
+    if (ec) throw ConfigError(StageDir(n) + ": cannot move aside: " + ec.message());
+    state_.stages.erase(n);
+  }
+}
+
+// --extend S: a training stage trained on past its recorded end when only its budget (and the
+// learning rate beyond what it trained) changed, so its first samples stay what they were.
+void Runner::Extend(const std::string& name) {
+  const int i = r_.Index(name);
+  if (i < 0) throw ConfigError("--extend: no stage \"" + name + "\" in " + r_.path);
+  const RecipeStage& st = r_.stages[i];
+  if (st.kind != "train") {
+    throw ConfigError("--extend " + name + ": a " + st.kind +
+                      " stage; only a training stage continues (--force-from " + name +
+                      " runs it again)");
+  }
+  auto rec = state_.stages.find(name);
+  const std::string run = StageDir(name) + "/run";
+  if (rec == state_.stages.end() || rec->second.state == "pending" || Checkpoints(run).empty()) {
+    throw ConfigError("--extend " + name + ": it has not trained yet (no checkpoint in " + run +
+                      "); a plain run starts it");
+  }
+  const std::string fp = Fingerprint(st);
+  if (fp == rec->second.fingerprint) {
+    std::cerr << "[recipe] " << name << ": unchanged; --extend has nothing to do\n";
+    return;
+  }
+  const int64_t trained = RunSamples(run);
+  const Json prev = LoadJsonFile(StageDir(name) + "/config.json");
+  const Json next = ComposeConfig(ScaledStage(st, f_.options), true);
+  const std::string why = ExtensionMismatch(prev, next, trained);
+  if (!why.empty()) {
+    throw ConfigError("--extend " + name + ": the new definition does not continue the run: " +
+                      why + " (--force-from " + name + " trains it again from the start)");
+  }
+  std::vector<std::string> readers;
+  for (const std::string& n : StagesReading(r_, name)) {
+    auto it = state_.stages.find(n);
+    if (it != state_.stages.end() && it->second.state != "pending") readers.push_back(n);
+  }
+  std::cerr << "[recipe] " << name << ": extended: continues from its newest checkpoint ("
+            << trained << " samples) to " << next["cluster"]["max_samples"].dump()
+            << " samples; " << readers.size() << " stage(s) that read it are redone\n";
+  if (f_.check) {
+    for (const std::string& n : readers) state_.stages.erase(n);  // in memory only: the plan
+  } else {
+    MoveAside(readers);
+  }
+  StageRecord& r = state_.stages[name];
+  r.state = "running";  // interrupted: the next loop resumes it from its newest checkpoint
+  r.fingerprint.clear();
+  r.outputs.clear();
+  r.output_sha256.clear();
+  r.figures = Json{{"extended_from_samples", trained}};
+  r.finished_at.clear();
+  if (f_.check) return;
+  std::ofstream(StageDir(name) + "/stage.log", std::ios::app)
+      << "\n== " << UtcStamp() << " perch recipe: --extend from " << trained << " samples\n";
+  Save();
+}
+
 int Runner::Run() {
   std::error_code ec;
   std::unique_ptr<DirLock> lock;
@@ -626,10 +699,6 @@ int Runner::Run() {
     lock = std::make_unique<DirLock>(dir_);
   }
   state_ = LoadRecipeState(dir_);
-  if (!f_.check) {
-    // The recipe as run, beside its state (status reads it; a copy is not a path into a checkout).
-    WriteFileAtomic(dir_ + "/recipe.json", LoadJsonFile(r_.path).dump(2) + "\n");
-  }
 
   // 1. What was recorded still holds: every done stage's outputs are there, unchanged.
   for (const RecipeStage& s : r_.stages) {
@@ -654,6 +723,7 @@ int Runner::Run() {
   if (!f_.force_from.empty() && r_.Index(f_.force_from) < 0) {
     throw ConfigError("--force-from: no stage \"" + f_.force_from + "\" in " + r_.path);
   }
+  if (!f_.extend.empty()) Extend(f_.extend);
   // 2. Stages whose config, inputs or scale changed, said before anything runs.
   for (const RecipeStage& s : r_.stages) fingerprints_[s.name] = Fingerprint(s);
   std::vector<std::string> changed;
@@ -678,7 +748,10 @@ int Runner::Run() {
                         " changed since it ran (config, inputs or --scale); it and "
                         "the stages after it that read it must run again: " +
                         list + ". Pass --force-from " + n + " to accept (their files move to " +
-                        dir_ + "/superseded/)");
+                        dir_ + "/superseded/)" +
+                        (r_.stages[r_.Index(n)].kind == "train"
+                             ? ", or --extend " + n + " if only its budget grew"
+                             : ""));
     }
   }
   if (force >= 0) {
@@ -688,14 +761,7 @@ int Runner::Run() {
     }
   }
   if (!redo.empty() && !f_.check) {
-    const std::string old = dir_ + "/superseded/" + UtcStamp();
-    fs::create_directories(old, ec);
-    for (const std::string& n : redo) {
-      std::cerr << "[recipe] " << n << ": redone (its files move to " << old << "/" << n << ")\n";
-      if (fs::exists(StageDir(n))) fs::rename(StageDir(n), old + "/" + n, ec);
-      if (ec) throw ConfigError(StageDir(n) + ": cannot move aside: " + ec.message());
-      state_.stages.erase(n);
-    }
+    MoveAside(redo);
     for (const RecipeStage& s : r_.stages) fingerprints_[s.name] = Fingerprint(s);
   }
   // 3. The range.
@@ -727,6 +793,9 @@ int Runner::Run() {
               << "\n";
     return 0;
   }
+  // The recipe as run, beside its state (status reads it; a copy is not a path into a checkout),
+  // once it is accepted: a refused change leaves the last one.
+  WriteFileAtomic(dir_ + "/recipe.json", LoadJsonFile(r_.path).dump(2) + "\n");
   Save();
   std::cerr << "[recipe] " << r_.name << " in " << dir_ << " (scale " << f_.options.scale
             << ", up to " << f_.parallel << " stage(s) at once)\n";

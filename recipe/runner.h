@@ -17,6 +17,9 @@ struct RecipeRunFlags {
   RecipeRunOptions options;
   std::string from, until;   // run only these stages (inclusive); earlier ones must be done
   std::string force_from;    // accept: this stage and every later one that ran are redone
+  // Accept a training stage's larger budget (and learning rates past what it trained): it
+  // continues from its newest checkpoint; the stages that read it are redone.
+  std::string extend;
   int parallel = 1;          // independent stages run side by side
   double progress_s = 10.0;  // console progress period
   std::string exe;           // the perch program (default: this one)

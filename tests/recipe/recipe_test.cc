@@ -217,5 +217,61 @@ TEST(Recipe, DeliveredRecipeIsValidAndSelfContained) {
   }
 }
 
+// The readers of a stage, through other stages too; a stage that reads nothing of it is not one.
+TEST(Recipe, StagesReadingFollowsReadersTransitively) {
+  const Recipe r = RecipeFromJson(ThreeStages(), "r.json");
+  EXPECT_THAT(StagesReading(r, "walk"), testing::ElementsAre("bank", "turn", "eval"));
+  EXPECT_THAT(StagesReading(r, "turn"), testing::ElementsAre("eval"));
+  EXPECT_TRUE(StagesReading(r, "eval").empty());
+  // In the delivered recipe the sit's first runs read nothing of the walker.
+  const Recipe d = LoadRecipe(std::string(PERCH_SOURCE_DIR) + "/recipes/sit_chair.json");
+  const std::vector<std::string> w = StagesReading(d, "walk2");
+  EXPECT_THAT(w, testing::Contains("walk"));
+  EXPECT_THAT(w, testing::Contains("turn_left"));
+  EXPECT_THAT(w, testing::Not(testing::Contains("sit_scratch")));
+  EXPECT_THAT(w, testing::Not(testing::Contains("walk1")));
+}
+
+// --extend accepts a larger budget and learning rates past what was trained, nothing else.
+TEST(Recipe, ExtensionAcceptsOnlyWhatLeavesTheTrainedPrefixAlone) {
+  const Json prev = Json::parse(R"({"cluster": {"max_samples": 100, "seed": 0},
+    "ppo": {"learning_rate": 1e-4, "lr_schedule": [[50, 3e-5], [70, 1e-5]]}})");
+  auto with = [&](const std::string& key, const std::string& field, const Json& v) {
+    Json n = prev;
+    n[key][field] = v;
+    return n;
+  };
+  const int64_t trained = 100;
+  EXPECT_EQ(ExtensionMismatch(prev, prev, trained), "");
+  // A larger budget, and a new rate from 100 samples on (past the trained prefix).
+  Json longer = with("cluster", "max_samples", 150);
+  longer["ppo"]["lr_schedule"] = Json::parse("[[50, 3e-5], [70, 1e-5], [100, 3e-5], [130, 1e-5]]");
+  EXPECT_EQ(ExtensionMismatch(prev, longer, trained), "");
+  // The same schedule written with a redundant entry at an unchanged rate still agrees.
+  Json same = longer;
+  same["ppo"]["lr_schedule"] = Json::parse("[[50, 3e-5], [60, 3e-5], [70, 1e-5], [100, 3e-5]]");
+  EXPECT_EQ(ExtensionMismatch(prev, same, trained), "");
+  // A rate changed inside the trained prefix, directly or by moving a breakpoint.
+  Json moved = longer;
+  moved["ppo"]["lr_schedule"] = Json::parse("[[50, 3e-5], [80, 1e-5], [100, 3e-5]]");
+  EXPECT_THAT(ExtensionMismatch(prev, moved, trained),
+              testing::HasSubstr("learning rate at 70 samples"));
+  EXPECT_THAT(ExtensionMismatch(prev, with("ppo", "learning_rate", 3e-4), trained),
+              testing::HasSubstr("learning rate at 0 samples"));
+  // A new entry before the trained end changes the prefix too.
+  Json early = longer;
+  early["ppo"]["lr_schedule"] = Json::parse("[[50, 3e-5], [70, 1e-5], [90, 3e-5]]");
+  EXPECT_THAT(ExtensionMismatch(prev, early, trained),
+              testing::HasSubstr("learning rate at 90 samples"));
+  // A budget below what was trained, or any other field, is refused naming it.
+  EXPECT_THAT(ExtensionMismatch(prev, with("cluster", "max_samples", 80), trained),
+              testing::HasSubstr("below the 100 samples"));
+  EXPECT_THAT(ExtensionMismatch(prev, with("cluster", "seed", 1), trained),
+              testing::HasSubstr("cluster.seed changed"));
+  Json extra = prev;
+  extra["reward"]["w_target"] = 0.5;
+  EXPECT_THAT(ExtensionMismatch(prev, extra, trained), testing::HasSubstr("reward.w_target"));
+}
+
 }  // namespace
 }  // namespace perch

@@ -65,6 +65,38 @@ first_update=$(basename "$first" .bin | sed 's/^ckpt-//')
 [ $((10#$resumed)) -ge $((10#$first_update)) ] ||
   fail "A: resumed from update $resumed, older than the checkpoint $first left by the killed run"
 
+# --extend: a larger budget continues the finished stage from its newest checkpoint; a change
+# inside what it trained (here its learning rate) is refused, naming it, with nothing written.
+python3 - "$src/recipes/sit_chair.json" "$tmp/longer.json" "$tmp/other_lr.json" << 'PY'
+import json, sys
+r = json.load(open(sys.argv[1]))
+w = [s for s in r["stages"] if s["name"] == "walk1"][0]
+w["max_samples"] *= 2
+json.dump(r, open(sys.argv[2], "w"))
+w.setdefault("set", {})["ppo.learning_rate"] = 3e-4
+json.dump(r, open(sys.argv[3], "w"))
+PY
+trained=$(state "$A" "print(d['stages']['walk1']['samples'])")
+before=$(stat -c %Y "$A/recipe-state.json")
+argsX=(--dir "$A" --actors 1 --scale 0.002 --until walk1 --set cluster.checkpoint_every=1)
+if "$bin" recipe run "$tmp/other_lr.json" "${argsX[@]}" --extend walk1 > "$tmp/x.log" 2>&1; then
+  fail "A: --extend accepted a changed learning rate"
+fi
+grep -q "learning rate at 0 samples" "$tmp/x.log" || fail "A: the refusal does not say why: $(cat "$tmp/x.log")"
+[ "$(stat -c %Y "$A/recipe-state.json")" = "$before" ] || fail "A: the refused --extend wrote the state"
+"$bin" recipe run "$tmp/longer.json" "${argsX[@]}" --extend walk1 > "$tmp/x.log" 2>&1 ||
+  fail "A: --extend: $(tail -20 "$tmp/x.log")"
+state "$A" "
+w=d['stages']['walk1']
+assert w['state']=='done', w
+assert w['attempts']==3, w
+assert w['samples']>=66000, w   # the new budget: 0.002 x 33 M
+assert w['figures']['extended_from_samples']==$trained, w" || fail "A: walk1 after --extend"
+resumed=$(grep -o "resumed from [^ ]*ckpt-[0-9]*" "$A/walk1/stage.log" | tail -1 | grep -o "[0-9]*$")
+last_before=$(grep -o "Run ended (max_samples) at update [0-9]*" "$A/walk1/stage.log" | head -1 | grep -o "[0-9]*$")
+[ $((10#$resumed)) -eq $((10#$last_before)) ] ||
+  fail "A: --extend resumed from update $resumed, not the finished run's last ($last_before)"
+
 # ---- B: the whole recipe at toy scale, killed in a training stage, resumed -------------------
 B=$tmp/b
 argsB=(recipe run recipes/sit_chair.json --dir "$B" --actors 1 --scale 0.0001 --progress-s 5)
