@@ -42,15 +42,26 @@ void RegisterInfoCommands(CLI::App& root, CLI::App& /*bench*/) {
     std::string config;
     std::vector<std::string> sets;
     bool resolved = false;
+    std::string fields;
+    bool json = false;
   };
   auto c = std::make_shared<ConfigArgs>();
   CLI::App* cc =
       root.add_subcommand("config", "Print a config as composed (base, --set) or fully resolved");
-  cc->add_option("--config", c->config, "experiment config (JSON)")->required();
+  cc->add_option("--config", c->config, "experiment config (JSON)");
   cc->add_option("--set", c->sets, "override a config field: section.field=VALUE (repeatable)");
   cc->add_flag("--resolved", c->resolved,
                "validate and fill in every default (as a run records it)");
+  cc->add_option("--fields", c->fields,
+                 "print a section's fields instead (env, ppo, cluster, or all): name, default, "
+                 "range, doc");
+  cc->add_flag("--json", c->json, "--fields: as JSON");
   cc->callback([c] {
+    if (!c->fields.empty()) {
+      std::cout << ConfigFieldsText(c->fields, c->json);
+      return;
+    }
+    if (c->config.empty()) throw CLI::ValidationError("--config", "required (or --fields)");
     if (c->resolved) {
       std::cout << ToJson(LoadExperimentConfig(c->config, c->sets)).dump(2) << "\n";
     } else {

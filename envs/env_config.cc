@@ -10,292 +10,249 @@ namespace {
 
 std::string Resolve(const std::string& path) { return ResolveProjectPath(path); }
 
-void CheckRange(const std::array<double, 2>& r, const std::string& where) {
-  if (!(r[0] >= 0.0 && r[0] <= r[1] && r[1] <= 180.0)) {
-    throw ConfigError(where + ": expected 0 <= lo <= hi <= 180 degrees");
-  }
-}
-
 }  // namespace
 
 EnvConfig EnvConfig::Load(const std::string& path) { return FromJson(LoadJsonFile(path), path); }
 
-EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
-  CheckKnownKeys(
-      j,
-      {"_comment", "humanoid_file", "chair", "chair_placement", "physics", "action_mode",
-       "pd_implicit", "obs_layout", "obs", "spawn", "init", "safety", "push",
-       "seat_contact_max_pelvis_z", "seat_contact_relative", "chair_random", "task", "stand"},
-      ctx);
-  EnvConfig c;
-  GetOptional(j, "humanoid_file", c.humanoid_file, ctx);
-  GetOptional(j, "chair", c.chair, ctx);
-  if (j.contains("chair_placement")) {
-    const Json& p = j["chair_placement"];
-    const std::string pc = ctx + ".chair_placement";
-    CheckKnownKeys(p, {"x", "y", "yaw_deg"}, pc);
-    GetOptional(p, "x", c.chair_placement.x, pc);
-    GetOptional(p, "y", c.chair_placement.y, pc);
-    double yaw_deg = c.chair_placement.yaw * 180.0 / M_PI;
-    GetOptional(p, "yaw_deg", yaw_deg, pc);
-    c.chair_placement.yaw = yaw_deg * M_PI / 180.0;
-  }
-  if (j.contains("physics")) c.physics = PhysicsConfig::FromJson(j["physics"], ctx + ".physics");
-  std::string mode = "torque";
-  GetOptional(j, "action_mode", mode, ctx);
-  if (mode == "torque") {
-    c.action_mode = ActionMode::kTorque;
-  } else if (mode == "pd") {
-    c.action_mode = ActionMode::kPd;
-  } else {
-    throw ConfigError(ctx + ".action_mode: expected \"torque\" or \"pd\", got \"" + mode + "\"");
-  }
-  GetOptional(j, "pd_implicit", c.pd_implicit, ctx);
-  std::string layout = "proprio_goal";
-  GetOptional(j, "obs_layout", layout, ctx);
-  c.obs_layout = ObsLayoutFromName(layout, ctx + ".obs_layout");
-  if (j.contains("obs")) {
-    const Json& o = j["obs"];
-    const std::string oc = ctx + ".obs";
-    CheckKnownKeys(
-        o, {"initial_z", "velocity_scale", "joint_speed_scale", "clip", "foot_contact_lag"}, oc);
-    GetOptional(o, "initial_z", c.obs.initial_z, oc);
-    GetOptional(o, "velocity_scale", c.obs.velocity_scale, oc);
-    GetOptional(o, "joint_speed_scale", c.obs.joint_speed_scale, oc);
-    GetOptional(o, "clip", c.obs.clip, oc);
-    GetOptional(o, "foot_contact_lag", c.obs.foot_contact_lag, oc);
-    if (!(c.obs.clip > 0.0)) throw ConfigError(oc + ".clip: must be > 0");
-  }
-  if (j.contains("spawn")) {
-    const Json& s = j["spawn"];
-    const std::string sc = ctx + ".spawn";
-    CheckKnownKeys(s,
-                   {"zone", "x", "y", "yaw_deg", "center_x", "center_y", "radius", "radius_max",
-                    "yaw_noise_deg", "zone1_deg", "zone2_deg", "zone3_deg", "hard_center_x",
-                    "hard_center_y", "hard_radius", "zones"},
-                   sc);
-    GetOptional(s, "zone", c.spawn.zone, sc);
-    GetOptional(s, "x", c.spawn.x, sc);
-    GetOptional(s, "y", c.spawn.y, sc);
-    GetOptional(s, "yaw_deg", c.spawn.yaw_deg, sc);
-    GetOptional(s, "center_x", c.spawn.center_x, sc);
-    GetOptional(s, "center_y", c.spawn.center_y, sc);
-    GetOptional(s, "radius", c.spawn.radius, sc);
-    GetOptional(s, "radius_max", c.spawn.radius_max, sc);
-    GetOptional(s, "yaw_noise_deg", c.spawn.yaw_noise_deg, sc);
-    GetOptional(s, "zone1_deg", c.spawn.zone1_deg, sc);
-    GetOptional(s, "zone2_deg", c.spawn.zone2_deg, sc);
-    GetOptional(s, "zone3_deg", c.spawn.zone3_deg, sc);
-    GetOptional(s, "hard_center_x", c.spawn.hard_center_x, sc);
-    GetOptional(s, "hard_center_y", c.spawn.hard_center_y, sc);
-    GetOptional(s, "hard_radius", c.spawn.hard_radius, sc);
-    if (!(c.spawn.hard_radius >= 0.0)) throw ConfigError(sc + ".hard_radius: must be >= 0");
-    GetOptional(s, "zones", c.spawn.zones, sc);
-    for (int z : c.spawn.zones) {
-      if (z < 1 || z > 3) throw ConfigError(sc + ".zones: each must be 1, 2 or 3");
-    }
-    if (!c.spawn.zones.empty() && c.spawn.zone == 0) {
-      throw ConfigError(sc + ".zones: needs zone 1-3 (zone 0 is the fixed pose)");
-    }
-    if (c.spawn.zone < 0 || c.spawn.zone > 3)
-      throw ConfigError(sc + ".zone: expected 0, 1, 2 or 3");
-    if (!(c.spawn.radius >= 0.0)) throw ConfigError(sc + ".radius: must be >= 0");
-    if (!(c.spawn.radius_max == 0.0 || c.spawn.radius_max >= c.spawn.radius)) {
-      throw ConfigError(sc + ".radius_max: must be 0 or >= radius");
-    }
-    if (!(c.spawn.yaw_noise_deg >= 0.0 && c.spawn.yaw_noise_deg <= 180.0)) {
-      throw ConfigError(sc + ".yaw_noise_deg: must be in [0, 180]");
-    }
-    CheckRange(c.spawn.zone1_deg, sc + ".zone1_deg");
-    CheckRange(c.spawn.zone2_deg, sc + ".zone2_deg");
-    CheckRange(c.spawn.zone3_deg, sc + ".zone3_deg");
-  }
-  if (j.contains("init")) {
-    const Json& i = j["init"];
-    const std::string ic = ctx + ".init";
-    CheckKnownKeys(i, {"qpos_file", "qpos_array", "qpos_row", "standing_clearance"}, ic);
-    GetOptional(i, "qpos_file", c.init.qpos_file, ic);
-    GetOptional(i, "qpos_array", c.init.qpos_array, ic);
-    GetOptional(i, "qpos_row", c.init.qpos_row, ic);
-    GetOptional(i, "standing_clearance", c.init.standing_clearance, ic);
-    if (c.init.qpos_row < 0) throw ConfigError(ic + ".qpos_row: must be >= 0");
-  }
-  if (j.contains("safety")) {
-    const Json& s = j["safety"];
-    const std::string sc = ctx + ".safety";
-    CheckKnownKeys(
-        s, {"max_joint_speed", "max_root_speed", "max_root_ang_speed", "max_abs_position"}, sc);
-    GetOptional(s, "max_joint_speed", c.safety.max_joint_speed, sc);
-    GetOptional(s, "max_root_speed", c.safety.max_root_speed, sc);
-    GetOptional(s, "max_root_ang_speed", c.safety.max_root_ang_speed, sc);
-    GetOptional(s, "max_abs_position", c.safety.max_abs_position, sc);
-  }
-  if (j.contains("push")) {
-    const Json& p = j["push"];
-    const std::string pc = ctx + ".push";
-    CheckKnownKeys(p, {"rate_hz", "force_min_n", "force_max_n", "duration_s", "delay_s", "until_s"},
-                   pc);
-    GetOptional(p, "rate_hz", c.push.rate_hz, pc);
-    GetOptional(p, "force_min_n", c.push.force_min_n, pc);
-    GetOptional(p, "force_max_n", c.push.force_max_n, pc);
-    GetOptional(p, "duration_s", c.push.duration_s, pc);
-    GetOptional(p, "delay_s", c.push.delay_s, pc);
-    GetOptional(p, "until_s", c.push.until_s, pc);
-    if (!(c.push.rate_hz >= 0.0 && c.push.rate_hz <= 100.0)) {
-      throw ConfigError(pc + ".rate_hz: must be in [0, 100] pushes per second");
-    }
-    if (!(c.push.force_min_n >= 0.0 && c.push.force_max_n >= c.push.force_min_n &&
-          c.push.force_max_n <= 1e4)) {
-      throw ConfigError(pc + ".force_min_n / force_max_n: need 0 <= min <= max <= 10000 N");
-    }
-    if (!(c.push.duration_s > 0.0 && c.push.duration_s <= 10.0)) {
-      throw ConfigError(pc + ".duration_s: must be in (0, 10] s");
-    }
-    if (!(c.push.delay_s >= 0.0)) throw ConfigError(pc + ".delay_s: must be >= 0");
-    if (!(c.push.until_s == 0.0 || c.push.until_s > c.push.delay_s)) {
-      throw ConfigError(pc + ".until_s: must be 0 (no end) or > delay_s");
-    }
-  }
-  GetOptional(j, "seat_contact_max_pelvis_z", c.seat_contact_max_pelvis_z, ctx);
-  GetOptional(j, "seat_contact_relative", c.seat_contact_relative, ctx);
-  if (j.contains("chair_random")) {
-    const Json& r = j["chair_random"];
-    const std::string rc = ctx + ".chair_random";
-    ChairRandomConfig& cr = c.chair_random;
-    CheckKnownKeys(
-        r,
-        {"prob", "seat_height", "seat_width", "seat_depth", "seat_thickness", "leg_size",
-         "backrest_prob", "backrest_height", "armrest_prob", "armrest_height", "mass", "dynamic"},
-        rc);
-    GetOptional(r, "prob", cr.prob, rc);
-    GetOptional(r, "backrest_prob", cr.backrest_prob, rc);
-    GetOptional(r, "armrest_prob", cr.armrest_prob, rc);
-    GetOptional(r, "mass", cr.mass, rc);
-    GetOptional(r, "dynamic", cr.dynamic, rc);
-    for (const char* p : {"prob", "backrest_prob", "armrest_prob"}) {
-      const double v = r.value(p, 0.0);
-      if (!(v >= 0 && v <= 1)) throw ConfigError(rc + "." + p + ": must be in [0, 1]");
-    }
-    if (!(cr.mass > 0)) throw ConfigError(rc + ".mass: must be > 0");
-    struct Range {
-      const char* name;
-      std::array<double, 2>* v;
-    };
-    for (const Range& x :
-         {Range{"seat_height", &cr.seat_height}, Range{"seat_width", &cr.seat_width},
-          Range{"seat_depth", &cr.seat_depth}, Range{"seat_thickness", &cr.seat_thickness},
-          Range{"leg_size", &cr.leg_size}, Range{"backrest_height", &cr.backrest_height},
-          Range{"armrest_height", &cr.armrest_height}}) {
-      GetOptional(r, x.name, *x.v, rc);
-      if (!((*x.v)[0] > 0 && (*x.v)[0] <= (*x.v)[1] && (*x.v)[1] < 2.0)) {
-        throw ConfigError(rc + "." + x.name + ": expected [lo, hi] with 0 < lo <= hi < 2 m");
-      }
-    }
-    if (cr.seat_thickness[1] >= cr.seat_height[0]) {
-      throw ConfigError(rc + ".seat_thickness: must stay below seat_height");
-    }
-    if (2 * cr.leg_size[1] >= std::min(cr.seat_width[0], cr.seat_depth[0])) {
-      throw ConfigError(rc + ".leg_size: legs wider than the smallest seat");
-    }
-  }
-  GetOptional(j, "task", c.task, ctx);
-  // Tasks other than "stand" are built and their names checked by tasks/ (tasks/registry.h).
-  if (c.task.empty()) throw ConfigError(ctx + ".task: must not be empty");
-  if (j.contains("stand")) {
-    const Json& s = j["stand"];
-    const std::string sc = ctx + ".stand";
-    CheckKnownKeys(s,
-                   {"alive_bonus", "upright_weight", "action_cost", "min_torso_z",
-                    "max_episode_steps", "walk_target"},
-                   sc);
-    GetOptional(s, "alive_bonus", c.stand.alive_bonus, sc);
-    GetOptional(s, "upright_weight", c.stand.upright_weight, sc);
-    GetOptional(s, "action_cost", c.stand.action_cost, sc);
-    GetOptional(s, "min_torso_z", c.stand.min_torso_z, sc);
-    GetOptional(s, "max_episode_steps", c.stand.max_episode_steps, sc);
-    GetOptional(s, "walk_target", c.stand.walk_target, sc);
-    if (c.stand.max_episode_steps < 1) throw ConfigError(sc + ".max_episode_steps: must be >= 1");
-  }
-  return c;
+namespace {
+
+// [lo, hi] degrees of a spawn zone's sector.
+FieldRule<std::array<double, 2>> Sector() {
+  return Satisfies<std::array<double, 2>>(
+      [](const std::array<double, 2>& r) { return r[0] >= 0.0 && r[0] <= r[1] && r[1] <= 180.0; },
+      "expected 0 <= lo <= hi <= 180 degrees");
+}
+// [lo, hi] metres of a random chair's dimension.
+FieldRule<std::array<double, 2>> Metres() {
+  return Satisfies<std::array<double, 2>>(
+      [](const std::array<double, 2>& r) { return r[0] > 0 && r[0] <= r[1] && r[1] < 2.0; },
+      "expected [lo, hi] with 0 < lo <= hi < 2 m");
+}
+FieldRule<double> Unit() {
+  return Satisfies<double>([](const double& v) { return v >= 0 && v <= 1; }, "must be in [0, 1]");
 }
 
-Json EnvConfig::ToJson() const {
-  return Json{
-      {"humanoid_file", humanoid_file},
-      {"chair", chair},
-      {"chair_placement",
-       {{"x", chair_placement.x},
-        {"y", chair_placement.y},
-        {"yaw_deg", chair_placement.yaw * 180.0 / M_PI}}},
-      {"physics", physics.ToJson()},
-      {"action_mode", action_mode == ActionMode::kTorque ? "torque" : "pd"},
-      {"pd_implicit", pd_implicit},
-      {"obs_layout", ObsLayoutName(obs_layout)},
-      {"obs",
-       {{"initial_z", obs.initial_z},
-        {"velocity_scale", obs.velocity_scale},
-        {"joint_speed_scale", obs.joint_speed_scale},
-        {"clip", obs.clip},
-        {"foot_contact_lag", obs.foot_contact_lag}}},
-      {"spawn",
-       {{"zone", spawn.zone},
-        {"x", spawn.x},
-        {"y", spawn.y},
-        {"yaw_deg", spawn.yaw_deg},
-        {"center_x", spawn.center_x},
-        {"center_y", spawn.center_y},
-        {"radius", spawn.radius},
-        {"radius_max", spawn.radius_max},
-        {"yaw_noise_deg", spawn.yaw_noise_deg},
-        {"zone1_deg", spawn.zone1_deg},
-        {"zone2_deg", spawn.zone2_deg},
-        {"zone3_deg", spawn.zone3_deg},
-        {"hard_center_x", spawn.hard_center_x},
-        {"hard_center_y", spawn.hard_center_y},
-        {"hard_radius", spawn.hard_radius},
-        {"zones", spawn.zones}}},
-      {"init",
-       {{"qpos_file", init.qpos_file},
-        {"qpos_array", init.qpos_array},
-        {"qpos_row", init.qpos_row},
-        {"standing_clearance", init.standing_clearance}}},
-      {"safety",
-       {{"max_joint_speed", safety.max_joint_speed},
-        {"max_root_speed", safety.max_root_speed},
-        {"max_root_ang_speed", safety.max_root_ang_speed},
-        {"max_abs_position", safety.max_abs_position}}},
-      {"push",
-       {{"rate_hz", push.rate_hz},
-        {"force_min_n", push.force_min_n},
-        {"force_max_n", push.force_max_n},
-        {"duration_s", push.duration_s},
-        {"delay_s", push.delay_s},
-        {"until_s", push.until_s}}},
-      {"seat_contact_max_pelvis_z", seat_contact_max_pelvis_z},
-      {"seat_contact_relative", seat_contact_relative},
-      {"chair_random",
-       {{"prob", chair_random.prob},
-        {"seat_height", chair_random.seat_height},
-        {"seat_width", chair_random.seat_width},
-        {"seat_depth", chair_random.seat_depth},
-        {"seat_thickness", chair_random.seat_thickness},
-        {"leg_size", chair_random.leg_size},
-        {"backrest_prob", chair_random.backrest_prob},
-        {"backrest_height", chair_random.backrest_height},
-        {"armrest_prob", chair_random.armrest_prob},
-        {"armrest_height", chair_random.armrest_height},
-        {"mass", chair_random.mass},
-        {"dynamic", chair_random.dynamic}}},
-      {"task", task},
-      {"stand",
-       {{"alive_bonus", stand.alive_bonus},
-        {"upright_weight", stand.upright_weight},
-        {"action_cost", stand.action_cost},
-        {"min_torso_z", stand.min_torso_z},
-        {"max_episode_steps", stand.max_episode_steps},
-        {"walk_target", stand.walk_target}}},
-  };
+const FieldTable<ChairPlacement>& PlacementFields() {
+  using C = ChairPlacement;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("x", &C::x, "chair position [m]")
+          .Add("y", &C::y, "chair position [m]")
+          .Custom(
+              "yaw_deg", "chair yaw [deg] (held in radians)",
+              [](const Json& j, C& c, const std::string& ctx) {
+                double deg = c.yaw * 180.0 / M_PI;
+                GetOptional(j, "yaw_deg", deg, ctx);
+                c.yaw = deg * M_PI / 180.0;
+              },
+              [](const C& c, Json& j) { j["yaw_deg"] = c.yaw * 180.0 / M_PI; });
+  return t;
 }
+
+const FieldTable<ObsConfig>& ObsFields() {
+  using C = ObsConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("initial_z", &C::initial_z, "subtracted from torso z [m]")
+          .Add("velocity_scale", &C::velocity_scale, "torso velocity feature scale [s/m]")
+          .Add("joint_speed_scale", &C::joint_speed_scale, "qdot_n = scale x qdot [s/rad]")
+          .Add("clip", &C::clip, "every feature is clipped to [-clip, clip]", Positive<double>())
+          .Add("foot_contact_lag", &C::foot_contact_lag,
+               "the flags in an observation are one step old (authors)");
+  return t;
+}
+
+const FieldTable<SpawnConfig>& SpawnFields() {
+  using C = SpawnConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("zone", &C::zone, "0: the fixed pose x, y, yaw_deg; 1-3: the paper's zones",
+               Satisfies<int>([](const int& z) { return z >= 0 && z <= 3; },
+                              "expected 0, 1, 2 or 3"))
+          .Add("x", &C::x, "zone 0 position [m]")
+          .Add("y", &C::y, "zone 0 position [m]")
+          .Add("yaw_deg", &C::yaw_deg, "zone 0 heading [deg]")
+          .Add("center_x", &C::center_x, "Zone 1 centre [m]")
+          .Add("center_y", &C::center_y, "Zone 1 centre [m]")
+          .Add("radius", &C::radius, "zone radius [m]", NonNegative<double>())
+          .Add("radius_max", &C::radius_max, "> 0: radius drawn in [radius, radius_max] [m]")
+          .Add("yaw_noise_deg", &C::yaw_noise_deg, "heading noise [deg]",
+               Satisfies<double>([](const double& v) { return v >= 0.0 && v <= 180.0; },
+                                 "must be in [0, 180]"))
+          .Add("zone1_deg", &C::zone1_deg, "Zone 1 sector [deg]", Sector())
+          .Add("zone2_deg", &C::zone2_deg, "Zone 2 sector [deg]", Sector())
+          .Add("zone3_deg", &C::zone3_deg, "Zone 3 sector [deg]", Sector())
+          .Add("hard_center_x", &C::hard_center_x, "Hard zones' centre [m]")
+          .Add("hard_center_y", &C::hard_center_y, "Hard zones' centre [m]")
+          .Add("hard_radius", &C::hard_radius, "Hard zones' radius [m]", NonNegative<double>())
+          .Add("zones", &C::zones, "each episode's zone drawn among these (1-3)")
+          .Rule([](const C& c, const std::string& ctx) {
+            for (int z : c.zones) {
+              if (z < 1 || z > 3) return ctx + ".zones: each must be 1, 2 or 3";
+            }
+            if (!c.zones.empty() && c.zone == 0) {
+              return ctx + ".zones: needs zone 1-3 (zone 0 is the fixed pose)";
+            }
+            if (!(c.radius_max == 0.0 || c.radius_max >= c.radius)) {
+              return ctx + ".radius_max: must be 0 or >= radius";
+            }
+            return std::string();
+          });
+  return t;
+}
+
+const FieldTable<InitConfig>& InitFields() {
+  using C = InitConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("qpos_file", &C::qpos_file, "start poses (.npz); empty: standing pose")
+          .Add("qpos_array", &C::qpos_array, "the array in qpos_file")
+          .Add("qpos_row", &C::qpos_row, "its row", NonNegative<int>())
+          .Add("standing_clearance", &C::standing_clearance,
+               "feet above the floor at a standing start [m]");
+  return t;
+}
+
+const FieldTable<SafetyConfig>& SafetyFields() {
+  using C = SafetyConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("max_joint_speed", &C::max_joint_speed, "beyond: invalid episode [rad/s]")
+          .Add("max_root_speed", &C::max_root_speed, "[m/s]")
+          .Add("max_root_ang_speed", &C::max_root_ang_speed, "[rad/s]")
+          .Add("max_abs_position", &C::max_abs_position, "[m]");
+  return t;
+}
+
+const FieldTable<PushConfig>& PushFields() {
+  using C = PushConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("rate_hz", &C::rate_hz, "mean pushes per second of episode",
+               Satisfies<double>([](const double& v) { return v >= 0.0 && v <= 100.0; },
+                                 "must be in [0, 100] pushes per second"))
+          .Add("force_min_n", &C::force_min_n, "[N]")
+          .Add("force_max_n", &C::force_max_n, "[N]")
+          .Add("duration_s", &C::duration_s, "[s]",
+               Satisfies<double>([](const double& v) { return v > 0.0 && v <= 10.0; },
+                                 "must be in (0, 10] s"))
+          .Add("delay_s", &C::delay_s, "no push starts in the episode's first delay_s [s]",
+               NonNegative<double>())
+          .Add("until_s", &C::until_s, "> 0: nor from until_s on [s]")
+          .Rule([](const C& c, const std::string& ctx) {
+            if (!(c.force_min_n >= 0.0 && c.force_max_n >= c.force_min_n && c.force_max_n <= 1e4)) {
+              return ctx + ".force_min_n / force_max_n: need 0 <= min <= max <= 10000 N";
+            }
+            if (!(c.until_s == 0.0 || c.until_s > c.delay_s)) {
+              return ctx + ".until_s: must be 0 (no end) or > delay_s";
+            }
+            return std::string();
+          });
+  return t;
+}
+
+const FieldTable<ChairRandomConfig>& ChairRandomFields() {
+  using C = ChairRandomConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("prob", &C::prob, "share of episodes on a random chair (0: always env.chair)",
+               Unit())
+          .Add("seat_height", &C::seat_height, "[lo, hi] m", Metres())
+          .Add("seat_width", &C::seat_width, "[lo, hi] m", Metres())
+          .Add("seat_depth", &C::seat_depth, "[lo, hi] m", Metres())
+          .Add("seat_thickness", &C::seat_thickness, "[lo, hi] m", Metres())
+          .Add("leg_size", &C::leg_size, "[lo, hi] m", Metres())
+          .Add("backrest_prob", &C::backrest_prob, "share with a backrest", Unit())
+          .Add("backrest_height", &C::backrest_height, "[lo, hi] m", Metres())
+          .Add("armrest_prob", &C::armrest_prob, "share with armrests", Unit())
+          .Add("armrest_height", &C::armrest_height, "[lo, hi] m", Metres())
+          .Add("mass", &C::mass, "[kg]", Positive<double>())
+          .Add("dynamic", &C::dynamic, "a body that can move (else static)")
+          .Rule([](const C& c, const std::string& ctx) {
+            if (c.seat_thickness[1] >= c.seat_height[0]) {
+              return ctx + ".seat_thickness: must stay below seat_height";
+            }
+            if (2 * c.leg_size[1] >= std::min(c.seat_width[0], c.seat_depth[0])) {
+              return ctx + ".leg_size: legs wider than the smallest seat";
+            }
+            return std::string();
+          });
+  return t;
+}
+
+const FieldTable<StandTaskConfig>& StandFields() {
+  using C = StandTaskConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("alive_bonus", &C::alive_bonus, "per control step while up")
+          .Add("upright_weight", &C::upright_weight, "x (torso up-vector z)")
+          .Add("action_cost", &C::action_cost, "x mean(a^2)")
+          .Add("min_torso_z", &C::min_torso_z, "alive while the torso is above [m]")
+          .Add("max_episode_steps", &C::max_episode_steps, "time limit [control steps]",
+               Satisfies<int>([](const int& v) { return v >= 1; }, "must be >= 1"))
+          .Add("walk_target", &C::walk_target, "goal features [m]");
+  return t;
+}
+
+}  // namespace
+
+const FieldTable<EnvConfig>& EnvConfigFields() {
+  using C = EnvConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Ignored("_comment", "free text")
+          .Add("humanoid_file", &C::humanoid_file, "the humanoid model (relative: source tree)")
+          .Add("chair", &C::chair, "a preset in data/chairs/, a path to a .json, or \"none\"")
+          .Nested("chair_placement", &C::chair_placement, PlacementFields(), "the chair's pose")
+          .Nested("physics", &C::physics, PhysicsConfigFields(), "simulation settings")
+          .Custom(
+              "action_mode", "\"torque\" (authors) or \"pd\"",
+              [](const Json& j, C& c, const std::string& ctx) {
+                std::string mode;
+                GetOptional(j, "action_mode", mode, ctx);
+                if (mode == "torque") {
+                  c.action_mode = ActionMode::kTorque;
+                } else if (mode == "pd") {
+                  c.action_mode = ActionMode::kPd;
+                } else {
+                  throw ConfigError(ctx + ".action_mode: expected \"torque\" or \"pd\", got \"" +
+                                    mode + "\"");
+                }
+              },
+              [](const C& c, Json& j) {
+                j["action_mode"] = c.action_mode == ActionMode::kTorque ? "torque" : "pd";
+              })
+          .Add("pd_implicit", &C::pd_implicit, "pd: implicit (stable) PD")
+          .Custom(
+              "obs_layout", "proprio, proprio_goal or proprio_chair",
+              [](const Json& j, C& c, const std::string& ctx) {
+                std::string layout;
+                GetOptional(j, "obs_layout", layout, ctx);
+                c.obs_layout = ObsLayoutFromName(layout, ctx + ".obs_layout");
+              },
+              [](const C& c, Json& j) { j["obs_layout"] = ObsLayoutName(c.obs_layout); })
+          .Nested("obs", &C::obs, ObsFields(), "observation features")
+          .Nested("spawn", &C::spawn, SpawnFields(), "where episodes start")
+          .Nested("init", &C::init, InitFields(), "the start pose")
+          .Nested("safety", &C::safety, SafetyFields(), "limits beyond which an episode is invalid")
+          .Nested("push", &C::push, PushFields(), "random pushes")
+          .Add("seat_contact_max_pelvis_z", &C::seat_contact_max_pelvis_z,
+               "contact = pelvis touches chair and pelvis z < this [m]")
+          .Add("seat_contact_relative", &C::seat_contact_relative,
+               "seat_contact_max_pelvis_z relative to the seat")
+          .Nested("chair_random", &C::chair_random, ChairRandomFields(), "random chairs")
+          .Add("task", &C::task, "the task the env runs (tasks/registry.h)",
+               Satisfies<std::string>([](const std::string& v) { return !v.empty(); },
+                                      "must not be empty"))
+          .Nested("stand", &C::stand, StandFields(), "the stand task");
+  return t;
+}
+
+EnvConfig EnvConfig::FromJson(const Json& j, const std::string& ctx) {
+  return EnvConfigFields().Read(j, ctx);
+}
+
+Json EnvConfig::ToJson() const { return EnvConfigFields().Write(*this); }
 
 std::string EnvConfig::HumanoidPath() const { return Resolve(humanoid_file); }
 

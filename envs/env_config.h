@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "common/field_table.h"
 #include "common/json_util.h"
 #include "envs/humanoid_world.h"
 
@@ -51,7 +52,7 @@ struct SpawnConfig {
   // zones 2 and 3 use their own circle around (hard_center_x, hard_center_y), the chair centre.
   // hard_radius 0: Zone 1's circle (our reading before 2026-12-04, stop 34).
   double hard_center_x = 0.0, hard_center_y = 0.0;  // [m]
-  double hard_radius = 2.0;                          // [m]
+  double hard_radius = 2.0;                         // [m]
   // Ours: when not empty, each episode's zone is drawn uniformly from these (1-3) instead of
   // `zone`: a curriculum stage that keeps the earlier stages' zones (docs/meta.md).
   std::vector<int> zones;
@@ -158,6 +159,9 @@ struct EnvConfig {
 };
 
 // "proprio", "proprio_goal", "proprio_chair" and back; ConfigError naming ctx on another name.
+// Every field of the "env" section, written once (common/field_table.h).
+const FieldTable<EnvConfig>& EnvConfigFields();
+
 ObsLayout ObsLayoutFromName(const std::string& name, const std::string& ctx);
 std::string ObsLayoutName(ObsLayout layout);
 int ObsLayoutDim(ObsLayout layout);  // 50, 52, 57

@@ -1,15 +1,15 @@
 #include "envs/humanoid_world.h"
 
-#include <algorithm>
-#include <cmath>
-
-#include <btBulletDynamicsCommon.h>
 #include <BulletDynamics/Featherstone/btMultiBody.h>
 #include <BulletDynamics/Featherstone/btMultiBodyConstraintSolver.h>
 #include <BulletDynamics/Featherstone/btMultiBodyDynamicsWorld.h>
 #include <BulletDynamics/Featherstone/btMultiBodyJointLimitConstraint.h>
 #include <BulletDynamics/Featherstone/btMultiBodyLink.h>
 #include <BulletDynamics/Featherstone/btMultiBodyLinkCollider.h>
+#include <btBulletDynamicsCommon.h>
+
+#include <algorithm>
+#include <cmath>
 
 #include "envs/pd_controller.h"
 
@@ -22,7 +22,9 @@ enum ObjectKind { kFloor = 1, kChair = 2, kHumanoid = 3 };
 btVector3 Bt(const Eigen::Vector3d& v) { return btVector3(v.x(), v.y(), v.z()); }
 Eigen::Vector3d Ei(const btVector3& v) { return Eigen::Vector3d(v.x(), v.y(), v.z()); }
 btQuaternion Bt(const Eigen::Quaterniond& q) { return btQuaternion(q.x(), q.y(), q.z(), q.w()); }
-Eigen::Quaterniond Ei(const btQuaternion& q) { return Eigen::Quaterniond(q.w(), q.x(), q.y(), q.z()); }
+Eigen::Quaterniond Ei(const btQuaternion& q) {
+  return Eigen::Quaterniond(q.w(), q.x(), q.y(), q.z());
+}
 btTransform Bt(const Eigen::Isometry3d& t) {
   return btTransform(Bt(Eigen::Quaterniond(t.rotation())), Bt(Eigen::Vector3d(t.translation())));
 }
@@ -93,76 +95,64 @@ std::string ChairBodyName(ChairBody body) {
   return "?";
 }
 
-PhysicsConfig PhysicsConfig::FromJson(const Json& j, const std::string& ctx) {
-  CheckKnownKeys(
-      j,
-      {"physics_dt", "substeps", "gravity", "solver_iterations", "contact_erp", "floor_friction",
-       "humanoid_friction", "chair_friction", "linear_damping", "angular_damping",
-       "max_joint_speed", "contact_distance", "limit_margin", "joint_damping", "damping_speed",
-       "helper_link_inertia", "floor_half_extent", "collision_pool_size", "chair_body"},
-      ctx);
-  PhysicsConfig c;
-  GetOptional(j, "physics_dt", c.physics_dt, ctx);
-  GetOptional(j, "substeps", c.substeps, ctx);
-  GetOptional(j, "gravity", c.gravity, ctx);
-  GetOptional(j, "solver_iterations", c.solver_iterations, ctx);
-  GetOptional(j, "contact_erp", c.contact_erp, ctx);
-  GetOptional(j, "floor_friction", c.floor_friction, ctx);
-  GetOptional(j, "humanoid_friction", c.humanoid_friction, ctx);
-  GetOptional(j, "chair_friction", c.chair_friction, ctx);
-  GetOptional(j, "linear_damping", c.linear_damping, ctx);
-  GetOptional(j, "angular_damping", c.angular_damping, ctx);
-  GetOptional(j, "contact_distance", c.contact_distance, ctx);
-  GetOptional(j, "max_joint_speed", c.max_joint_speed, ctx);
-  if (!(c.max_joint_speed > 0.0)) throw ConfigError(ctx + ".max_joint_speed: must be > 0");
-  GetOptional(j, "limit_margin", c.limit_margin, ctx);
-  if (!(c.limit_margin >= 0.0)) throw ConfigError(ctx + ".limit_margin: must be >= 0");
-  GetOptional(j, "joint_damping", c.joint_damping, ctx);
-  if (!(c.joint_damping >= 0.0)) throw ConfigError(ctx + ".joint_damping: must be >= 0");
-  GetOptional(j, "damping_speed", c.damping_speed, ctx);
-  GetOptional(j, "helper_link_inertia", c.helper_link_inertia, ctx);
-  if (!(c.helper_link_inertia > 0.0)) throw ConfigError(ctx + ".helper_link_inertia: must be > 0");
-  GetOptional(j, "floor_half_extent", c.floor_half_extent, ctx);
-  if (!(c.floor_half_extent >= 0.0)) {
-    throw ConfigError(ctx + ".floor_half_extent: must be >= 0 (0: infinite bounds)");
-  }
-  GetOptional(j, "collision_pool_size", c.collision_pool_size, ctx);
-  if (c.collision_pool_size < 1) throw ConfigError(ctx + ".collision_pool_size: must be >= 1");
-  std::string chair_body = ChairBodyName(c.chair_body);
-  GetOptional(j, "chair_body", chair_body, ctx);
-  c.chair_body = ChairBodyFromName(chair_body, ctx + ".chair_body");
-  if (!(c.damping_speed >= 0.0)) throw ConfigError(ctx + ".damping_speed: must be >= 0 (0: off)");
-  if (!(c.physics_dt > 0.0 && c.physics_dt < 0.1)) throw ConfigError(ctx + ".physics_dt: must be in (0, 0.1) s");
-  if (c.substeps < 1) throw ConfigError(ctx + ".substeps: must be >= 1");
-  if (c.solver_iterations < 1) throw ConfigError(ctx + ".solver_iterations: must be >= 1");
-  if (!(c.contact_erp > 0.0 && c.contact_erp <= 1.0)) throw ConfigError(ctx + ".contact_erp: must be in (0, 1]");
-  for (double f : {c.floor_friction, c.humanoid_friction, c.chair_friction}) {
-    if (!(f >= 0.0)) throw ConfigError(ctx + ": frictions must be >= 0");
-  }
-  return c;
+const FieldTable<PhysicsConfig>& PhysicsConfigFields() {
+  using C = PhysicsConfig;
+  auto at_least_one = Satisfies<int>([](const int& v) { return v >= 1; }, "must be >= 1");
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("physics_dt", &C::physics_dt, "physics step [s] (240 Hz)",
+               Satisfies<double>([](const double& v) { return v > 0.0 && v < 0.1; },
+                                 "must be in (0, 0.1) s"))
+          .Add("substeps", &C::substeps, "physics steps per control step", at_least_one)
+          .Add("gravity", &C::gravity, "[m/s^2], along -z")
+          .Add("solver_iterations", &C::solver_iterations, "PGS iterations", at_least_one)
+          .Add("contact_erp", &C::contact_erp, "Bullet erp2 for contacts",
+               Satisfies<double>([](const double& v) { return v > 0.0 && v <= 1.0; },
+                                 "must be in (0, 1]"))
+          .Add("floor_friction", &C::floor_friction, "lateral friction")
+          .Add("humanoid_friction", &C::humanoid_friction, "lateral friction")
+          .Add("chair_friction", &C::chair_friction, "lateral friction")
+          .Add("linear_damping", &C::linear_damping, "btMultiBody damping [1/s]")
+          .Add("angular_damping", &C::angular_damping, "btMultiBody damping [1/s]")
+          .Add("contact_distance", &C::contact_distance, "contact below this distance [m]")
+          .Add("max_joint_speed", &C::max_joint_speed, "Bullet's joint speed clamp [rad/s]",
+               Positive<double>())
+          .Add("limit_margin", &C::limit_margin, "limit constraints within this of a limit [rad]",
+               NonNegative<double>())
+          .Add("joint_damping", &C::joint_damping, "passive damping [N m s/rad]",
+               NonNegative<double>())
+          .Add("damping_speed", &C::damping_speed,
+               "full torque alone cannot spin a joint faster [rad/s]",
+               Satisfies<double>([](const double& v) { return v >= 0.0; }, "must be >= 0 (0: off)"))
+          .Add("helper_link_inertia", &C::helper_link_inertia, "massless links' inertia",
+               Positive<double>())
+          .Add("floor_half_extent", &C::floor_half_extent, "[m] (0: infinite bounds)",
+               Satisfies<double>([](const double& v) { return v >= 0.0; },
+                                 "must be >= 0 (0: infinite bounds)"))
+          .Add("collision_pool_size", &C::collision_pool_size, "Bullet's collision pools",
+               at_least_one)
+          .Custom(
+              "chair_body", "static, dynamic or file (the chair file says)",
+              [](const Json& j, C& c, const std::string& ctx) {
+                std::string name = ChairBodyName(c.chair_body);
+                GetOptional(j, "chair_body", name, ctx);
+                c.chair_body = ChairBodyFromName(name, ctx + ".chair_body");
+              },
+              [](const C& c, Json& j) { j["chair_body"] = ChairBodyName(c.chair_body); })
+          .Rule([](const C& c, const std::string& ctx) {
+            for (double f : {c.floor_friction, c.humanoid_friction, c.chair_friction}) {
+              if (!(f >= 0.0)) return ctx + ": frictions must be >= 0";
+            }
+            return std::string();
+          });
+  return t;
 }
 
-Json PhysicsConfig::ToJson() const {
-  return Json{{"physics_dt", physics_dt},
-              {"substeps", substeps},
-              {"gravity", gravity},
-              {"solver_iterations", solver_iterations},
-              {"contact_erp", contact_erp},
-              {"floor_friction", floor_friction},
-              {"humanoid_friction", humanoid_friction},
-              {"chair_friction", chair_friction},
-              {"linear_damping", linear_damping},
-              {"angular_damping", angular_damping},
-              {"contact_distance", contact_distance},
-              {"max_joint_speed", max_joint_speed},
-              {"limit_margin", limit_margin},
-              {"joint_damping", joint_damping},
-              {"damping_speed", damping_speed},
-              {"helper_link_inertia", helper_link_inertia},
-              {"floor_half_extent", floor_half_extent},
-              {"collision_pool_size", collision_pool_size},
-              {"chair_body", ChairBodyName(chair_body)}};
+PhysicsConfig PhysicsConfig::FromJson(const Json& j, const std::string& ctx) {
+  return PhysicsConfigFields().Read(j, ctx);
 }
+
+Json PhysicsConfig::ToJson() const { return PhysicsConfigFields().Write(*this); }
 
 Eigen::Isometry3d ChairPlacement::Transform() const {
   Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
@@ -207,13 +197,13 @@ struct World::Scene {
   btMultiBodyConstraintSolver solver;
   btMultiBodyDynamicsWorld world{&dispatcher, &broadphase, &solver, &collision_config};
   std::vector<std::unique_ptr<btCollisionShape>> shapes;
-  std::vector<std::unique_ptr<btCollisionObject>> objects;  // colliders, floor, chair
+  std::vector<std::unique_ptr<btCollisionObject>> objects;          // colliders, floor, chair
   std::vector<std::unique_ptr<btMultiBodyConstraint>> constraints;  // [num_joints] joint limits
   std::vector<char> limit_active;  // [num_joints] constraint currently in the world
   std::unique_ptr<btMultiBody> body;
-  btRigidBody* chair = nullptr;  // owned by `objects`
-  std::vector<int> joint_link;   // [num_joints] link index of each joint
-  std::vector<int> body_link;    // [num_bodies] link carrying each body (-1: base)
+  btRigidBody* chair = nullptr;                 // owned by `objects`
+  std::vector<int> joint_link;                  // [num_joints] link index of each joint
+  std::vector<int> body_link;                   // [num_bodies] link carrying each body (-1: base)
   std::vector<Eigen::Isometry3d> inertial_inv;  // [num_bodies] body frame in its link frame
   btAlignedObjectArray<btQuaternion> scratch_q;
   btAlignedObjectArray<btVector3> scratch_m;
@@ -240,14 +230,12 @@ struct World::Scene {
 
 World::World(const HumanoidModel& model, const Chair* chair, const ChairPlacement& placement,
              const PhysicsConfig& config)
-    : model_(model),
-      chair_(chair),
-      placement_(placement),
-      config_(config) {
+    : model_(model), chair_(chair), placement_(placement), config_(config) {
   damping_.resize(model.num_joints());
   for (int j = 0; j < model.num_joints(); ++j) {
-    damping_[j] = config.joint_damping +
-                  (config.damping_speed > 0.0 ? model.joint(j).max_torque / config.damping_speed : 0.0);
+    damping_[j] =
+        config.joint_damping +
+        (config.damping_speed > 0.0 ? model.joint(j).max_torque / config.damping_speed : 0.0);
   }
   HumanoidState standing;
   standing.root_pos = Eigen::Vector3d(0, 0, model.standing_root_height());
@@ -331,8 +319,8 @@ void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
     sc.Keep(compound);
     for (const ChairBox& b : chair_->boxes) {
       auto* box = sc.Keep(new btBoxShape(Bt(b.half_extents())));
-      compound->addChildShape(btTransform(btQuaternion::getIdentity(), Bt(b.center() - chair_->com)),
-                              box);
+      compound->addChildShape(
+          btTransform(btQuaternion::getIdentity(), Bt(b.center() - chair_->com)), box);
     }
     const bool dynamic = chair_->dynamic && config_.chair_body != ChairBody::kStatic;
     const double mass = dynamic ? chair_->mass : 0.0;
@@ -369,8 +357,9 @@ void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
   sc.body_link.assign(nb, -1);
   sc.inertial_inv.resize(nb);
   const Body& root = model_.body(0);
-  sc.body = std::make_unique<btMultiBody>(model_.num_joints(), root.mass, Bt(root.principal_inertia),
-                                          /*fixedBase=*/false, /*canSleep=*/false);
+  sc.body =
+      std::make_unique<btMultiBody>(model_.num_joints(), root.mass, Bt(root.principal_inertia),
+                                    /*fixedBase=*/false, /*canSleep=*/false);
   btMultiBody* mb = sc.body.get();
   // Link frames at q = 0 with the root at the origin; only relative frames matter here.
   const std::vector<double> zeros(model_.num_joints(), 0.0);
@@ -399,8 +388,7 @@ void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
       const double hm = model_.helper_link_mass();
       const double mass = carrier ? b.mass : hm;
       const Eigen::Vector3d inertia =
-          carrier ? b.principal_inertia
-                  : Eigen::Vector3d::Constant(config_.helper_link_inertia);
+          carrier ? b.principal_inertia : Eigen::Vector3d::Constant(config_.helper_link_inertia);
       mb->setupRevolute(link, mass, Bt(inertia), parent_link, Bt(rot_parent_to_this.normalized()),
                         Bt(axis), Bt(parent_to_pivot), Bt(pivot_to_com), true);
       mb->getLink(link).m_flags |= BT_MULTIBODYLINKFLAGS_DISABLE_ALL_PARENT_COLLISION;
@@ -422,7 +410,8 @@ void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
   mb->setCanSleep(false);
 
   // Pose and velocities. Bullet's base is the torso's inertial frame.
-  const Eigen::Isometry3d root_pose = Translation(hs.root_pos) * Eigen::Isometry3d(hs.root_quat.normalized());
+  const Eigen::Isometry3d root_pose =
+      Translation(hs.root_pos) * Eigen::Isometry3d(hs.root_quat.normalized());
   const Eigen::Isometry3d base = root_pose * InertialFrame(root);
   mb->setBaseWorldTransform(Bt(base));
   const Eigen::Vector3d com_offset = base.translation() - hs.root_pos;
@@ -481,7 +470,8 @@ void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
     col->setUserIndex(kHumanoid);
     col->setUserIndex2(bi);
     sc.objects.emplace_back(col);
-    sc.world.addCollisionObject(col, btBroadphaseProxy::DefaultFilter, btBroadphaseProxy::AllFilter);
+    sc.world.addCollisionObject(col, btBroadphaseProxy::DefaultFilter,
+                                btBroadphaseProxy::AllFilter);
     if (l < 0) {
       mb->setBaseCollider(col);
     } else {
@@ -539,7 +529,8 @@ void World::UpdateJointLimits() {
     const Joint& jt = model_.joint(j);
     const int l = sc.joint_link[j];
     const double q = mb->getJointPos(l);
-    const double reach = config_.limit_margin + 2.0 * std::abs(mb->getJointVel(l)) * config_.physics_dt;
+    const double reach =
+        config_.limit_margin + 2.0 * std::abs(mb->getJointVel(l)) * config_.physics_dt;
     const bool near = q < jt.lower + reach || q > jt.upper - reach;
     if (near != static_cast<bool>(sc.limit_active[j])) {
       if (near) {
@@ -565,7 +556,8 @@ void World::StepPhysics() {
 
 void World::RawControlStepsPd(int n, const PdController& pd, const float* action) {
   Scene& sc = *scene_;
-  double q[HumanoidModel::kNumJoints], qd[HumanoidModel::kNumJoints], tau[HumanoidModel::kNumJoints];
+  double q[HumanoidModel::kNumJoints], qd[HumanoidModel::kNumJoints],
+      tau[HumanoidModel::kNumJoints];
   for (int i = 0; i < n; ++i) {
     for (int s = 0; s < config_.substeps; ++s) {
       UpdateJointLimits();
@@ -591,8 +583,10 @@ void World::AddJointTorques(const double* tau) {
   }
   // Damp the speeds the joints will have after this step (coupled backward Euler), so that
   // strong damping stays stable on the light feet and hands.
-  const Eigen::Matrix<double, HumanoidModel::kNumJoints, 1> next = damp_solve_ * (v + damp_push_ * t);
-  for (int j = 0; j < nj; ++j) mb->addJointTorque(scene_->joint_link[j], t[j] - damping_[j] * next[j]);
+  const Eigen::Matrix<double, HumanoidModel::kNumJoints, 1> next =
+      damp_solve_ * (v + damp_push_ * t);
+  for (int j = 0; j < nj; ++j)
+    mb->addJointTorque(scene_->joint_link[j], t[j] - damping_[j] * next[j]);
 }
 
 void World::ReadJoints(double* q, double* qd) const {
@@ -640,7 +634,8 @@ Contacts World::ReadContacts() const {
     if (a->getUserIndex() != kHumanoid || b->getUserIndex() == kHumanoid) continue;
     const int body = a->getUserIndex2();
     if (b->getUserIndex() == kFloor) {
-      for (int f = 0; f < 2; ++f) c.foot_floor[f] = c.foot_floor[f] || body == model_.foot_bodies()[f];
+      for (int f = 0; f < 2; ++f)
+        c.foot_floor[f] = c.foot_floor[f] || body == model_.foot_bodies()[f];
     } else if (b->getUserIndex() == kChair) {
       c.humanoid_chair = true;
       c.pelvis_chair = c.pelvis_chair || body == pelvis;

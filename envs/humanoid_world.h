@@ -8,14 +8,14 @@
 // are btMultiBodyJointLimitConstraints. Actuation is explicit joint torque only.
 #pragma once
 
+#include <Eigen/Dense>
+#include <Eigen/Geometry>
 #include <array>
 #include <memory>
 #include <string>
 #include <vector>
 
-#include <Eigen/Dense>
-#include <Eigen/Geometry>
-
+#include "common/field_table.h"
 #include "common/json_util.h"
 #include "envs/chair.h"
 #include "envs/humanoid_model.h"
@@ -41,16 +41,17 @@ struct PhysicsConfig {
   // The paper's 240 Hz physics / 60 Hz control, matching our retargeted references (1/60 s per
   // frame). The authors ran 0.0165 / 4 s (242.4 / 60.6 Hz, notes 1.1): set 0.004125 for that.
   double physics_dt = 1.0 / 240.0;  // [s]
-  int substeps = 4;                // physics steps per control step
-  double gravity = 9.8;            // [m/s^2], along -z
-  int solver_iterations = 5;       // PGS iterations (authors: 5; docs/env.md)
-  double contact_erp = 0.9;        // Bullet erp2 for contacts (authors: 0.9)
-  double floor_friction = 0.8;     // lateral; Bullet multiplies the two bodies' frictions
-  double humanoid_friction = 0.5;  // Bullet's MJCF importer default
-  double chair_friction = 0.5;     // Bullet's URDF default
-  double linear_damping = 0.04;    // btMultiBody defaults, as in the authors' sim [1/s]
+  int substeps = 4;                 // physics steps per control step
+  double gravity = 9.8;             // [m/s^2], along -z
+  int solver_iterations = 5;        // PGS iterations (authors: 5; docs/env.md)
+  double contact_erp = 0.9;         // Bullet erp2 for contacts (authors: 0.9)
+  double floor_friction = 0.8;      // lateral; Bullet multiplies the two bodies' frictions
+  double humanoid_friction = 0.5;   // Bullet's MJCF importer default
+  double chair_friction = 0.5;      // Bullet's URDF default
+  double linear_damping = 0.04;     // btMultiBody defaults, as in the authors' sim [1/s]
   double angular_damping = 0.04;
-  // Bullet clamps every joint speed to this [rad/s] (btMultiBody's default, as in the authors' sim).
+  // Bullet clamps every joint speed to this [rad/s] (btMultiBody's default, as in the authors'
+  // sim).
   double max_joint_speed = 100.0;
   // A manifold point counts as contact when its signed distance is below this [m].
   double contact_distance = 0.02;
@@ -61,7 +62,7 @@ struct PhysicsConfig {
   // Passive joint damping, applied implicitly (docs/env.md "Stability under random actions"):
   // c_j = joint_damping + max_torque_j / damping_speed, i.e. full torque alone cannot spin a
   // joint faster than damping_speed. joint_damping 0 and damping_speed 0: none (the authors').
-  double joint_damping = 0.0;  // [N m s/rad], every joint
+  double joint_damping = 0.0;   // [N m s/rad], every joint
   double damping_speed = 15.0;  // [rad/s]; 0: off
   // Rotational inertia of each helper link (isotropic) [kg m^2]. The authors' importer: about
   // 4e-8 (a 1 g point), which lets the ankles and hips reach Bullet's speed clamp within one
@@ -83,6 +84,8 @@ struct PhysicsConfig {
   static PhysicsConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;
 };
+// Every physics field, written once (common/field_table.h).
+const FieldTable<PhysicsConfig>& PhysicsConfigFields();
 
 // Where the chair stands: rotation about the vertical axis, then translation.
 struct ChairPlacement {
@@ -92,12 +95,12 @@ struct ChairPlacement {
 };
 
 struct HumanoidState {
-  Eigen::Vector3d root_pos = Eigen::Vector3d::Zero();  // torso body origin, world [m]
+  Eigen::Vector3d root_pos = Eigen::Vector3d::Zero();             // torso body origin, world [m]
   Eigen::Quaterniond root_quat = Eigen::Quaterniond::Identity();  // torso frame -> world
   Eigen::Vector3d root_lin_vel = Eigen::Vector3d::Zero();  // of the torso origin, world [m/s]
   Eigen::Vector3d root_ang_vel = Eigen::Vector3d::Zero();  // world [rad/s]
-  std::array<double, HumanoidModel::kNumJoints> q{};   // observation order [rad]
-  std::array<double, HumanoidModel::kNumJoints> qd{};  // observation order [rad/s]
+  std::array<double, HumanoidModel::kNumJoints> q{};       // observation order [rad]
+  std::array<double, HumanoidModel::kNumJoints> qd{};      // observation order [rad/s]
 };
 
 struct ChairState {
@@ -191,8 +194,8 @@ class World {
   std::array<double, HumanoidModel::kNumJoints> tau_{};
   Eigen::Vector3d root_force_ = Eigen::Vector3d::Zero();
   std::vector<double> damping_;  // [num_joints] passive damping c_j [N m s/rad]
-  Eigen::MatrixXd damp_push_;   // [nj x nj] h Minv [s/(kg m^2)]; empty: no damping
-  Eigen::MatrixXd damp_solve_;  // [nj x nj] (1 + h Minv C)^-1
+  Eigen::MatrixXd damp_push_;    // [nj x nj] h Minv [s/(kg m^2)]; empty: no damping
+  Eigen::MatrixXd damp_solve_;   // [nj x nj] (1 + h Minv C)^-1
 };
 
 }  // namespace perch

@@ -1,11 +1,11 @@
 #include "experiment/experiment.h"
 
-#include "common/config_file.h"
+#include <algorithm>
+#include <array>
 
-#ifdef PERCH_HAVE_ENVS
+#include "common/config_file.h"
 #include "tasks/meta_env.h"
 #include "tasks/task_env.h"
-#endif
 
 namespace perch {
 
@@ -90,14 +90,10 @@ Json ToJson(const ExperimentConfig& c) {
 
 std::unique_ptr<Env> MakeExperimentEnv(const ExperimentConfig& c) {
   if (c.env_backend == "mock") return std::make_unique<MockEnv>(c.mock_env);
-#ifdef PERCH_HAVE_ENVS
   // Any task by name (stand, walk, ...): tasks/ builds the humanoid-chair env with it.
   const TaskEnvConfig tc = TaskEnvConfig::FromJson(c.env, c.source + ".env");
   if (c.cluster.task == "meta") return std::make_unique<MetaEnv>(tc);
   return MakeTaskEnv(tc);
-#else
-  throw ConfigError(c.source + ".env_backend: \"bullet\": this build has no envs/ library");
-#endif
 }
 
 PolicyConfig ResolvePolicyConfig(const ExperimentConfig& c, const EnvSpec& spec) {
@@ -114,7 +110,6 @@ PolicyConfig ResolvePolicyConfig(const ExperimentConfig& c, const EnvSpec& spec)
   p["obs_dim"] = spec.obs_dim;
   if (!meta) p["act_dim"] = spec.act_dim;
   if (!p.contains("kind")) p["kind"] = meta ? "meta" : "gaussian";
-#ifdef PERCH_HAVE_ENVS
   if (meta && c.env_backend == "bullet") {
     // The switch's classes are the env's choice of subtasks; the target drives walk.
     const MetaConfig m =
@@ -128,17 +123,63 @@ PolicyConfig ResolvePolicyConfig(const ExperimentConfig& c, const EnvSpec& spec)
     p["target_choice"] = m.target_choice();
     p["act_dim"] = 2;
   }
-#endif
   return PolicyConfigFromJson(p, ctx);
 }
 
 std::vector<FrozenPolicyData> ExperimentFrozenPolicies(const ExperimentConfig& c) {
   if (c.cluster.task != "meta" || c.env_backend != "bullet") return {};
-#ifdef PERCH_HAVE_ENVS
   return LoadFrozenPolicies(TaskEnvConfig::FromJson(c.env, c.source + ".env"));
-#else
-  throw ConfigError(c.source + ".cluster.task: \"meta\": this build has no tasks/ library");
-#endif
+}
+
+Json ConfigFieldTables() {
+  return Json{{"env", EnvConfigFields().Describe()},
+              {"ppo", PpoConfigFields().Describe()},
+              {"cluster", ClusterConfigFields().Describe()}};
+}
+
+namespace {
+
+void FieldRows(const Json& rows, const std::string& prefix,
+               std::vector<std::array<std::string, 4>>* out) {
+  for (const Json& r : rows) {
+    const std::string name = prefix + "." + r["name"].get<std::string>();
+    if (r.contains("fields")) {
+      FieldRows(r["fields"], name, out);
+      continue;
+    }
+    out->push_back({name, r.contains("default") ? r["default"].dump() : "", r.value("rule", ""),
+                    r.value("doc", "")});
+  }
+}
+
+}  // namespace
+
+std::string ConfigFieldsText(const std::string& section, bool json) {
+  const Json all = ConfigFieldTables();
+  Json pick = Json::object();
+  if (section == "all") {
+    pick = all;
+  } else if (all.contains(section)) {
+    pick[section] = all[section];
+  } else {
+    throw ConfigError("--fields: unknown section \"" + section + "\" (env, ppo, cluster, all)");
+  }
+  if (json) return pick.dump(2) + "\n";
+  std::vector<std::array<std::string, 4>> rows;
+  for (auto it = pick.begin(); it != pick.end(); ++it) FieldRows(it.value(), it.key(), &rows);
+  size_t w0 = 0, w1 = 0;
+  for (const auto& r : rows) {
+    w0 = std::max(w0, r[0].size());
+    w1 = std::max(w1, std::min<size_t>(r[1].size(), 24));
+  }
+  std::string out;
+  for (const auto& r : rows) {
+    std::string line = r[0] + std::string(w0 + 2 - r[0].size(), ' ') + r[1];
+    line += std::string(r[1].size() < w1 + 2 ? w1 + 2 - r[1].size() : 2, ' ') + r[3];
+    if (!r[2].empty()) line += " (" + r[2] + ")";
+    out += line + "\n";
+  }
+  return out;
 }
 
 std::string CompatKey(const ExperimentConfig& c, const PolicyConfig& policy) {

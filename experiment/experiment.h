@@ -53,6 +53,14 @@ PolicyConfig ResolvePolicyConfig(const ExperimentConfig& c, const EnvSpec& spec)
 // ships them to the actors.
 std::vector<FrozenPolicyData> ExperimentFrozenPolicies(const ExperimentConfig& c);
 
+// The sections' field tables (common/field_table.h): {"env": [...], "ppo": [...], "cluster":
+// [...]}, each row {name, default or fields, doc, rule}. `perch config --fields` prints them.
+Json ConfigFieldTables();
+// `perch config --fields SECTION [--json]`: one section's table (or "all"), as aligned text
+// ("section.field  default  rule  doc", nested fields dotted) or JSON. ConfigError for an
+// unknown section.
+std::string ConfigFieldsText(const std::string& section, bool json);
+
 // What must match between a checkpoint and the config resuming from it: task, dims, network.
 std::string CompatKey(const ExperimentConfig& c, const PolicyConfig& policy);
 

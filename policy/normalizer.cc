@@ -101,25 +101,23 @@ RunningMeanStd RunningMeanStd::FromProto(const proto::RunningStats& p, int expec
   return r;
 }
 
-Json ToJson(const NormalizerConfig& c) {
-  return Json{{"normalize_obs", c.normalize_obs},
-              {"obs_clip", c.obs_clip},
-              {"obs_eps", c.obs_eps},
-              {"initial_count", c.initial_count}};
+const FieldTable<NormalizerConfig>& NormalizerConfigFields() {
+  using C = NormalizerConfig;
+  static const FieldTable<NormalizerConfig> t =
+      FieldTable<C>()
+          .Add("normalize_obs", &C::normalize_obs, "off: observations pass through unchanged")
+          .Add("obs_clip", &C::obs_clip, "normalized observations clipped to +-obs_clip",
+               Positive<float>())
+          .Add("obs_eps", &C::obs_eps, "added to the variance", NonNegative<float>())
+          .Add("initial_count", &C::initial_count, "prior count of the statistics (mean 0, var 1)",
+               NonNegative<double>());
+  return t;
 }
 
+Json ToJson(const NormalizerConfig& c) { return NormalizerConfigFields().Write(c); }
+
 NormalizerConfig NormalizerConfigFromJson(const Json& j, const std::string& ctx) {
-  if (!j.is_object()) throw ConfigError(ctx + ": expected an object, got " + j.dump());
-  CheckKnownKeys(j, {"normalize_obs", "obs_clip", "obs_eps", "initial_count"}, ctx);
-  NormalizerConfig c;
-  GetOptional(j, "normalize_obs", c.normalize_obs, ctx);
-  GetOptional(j, "obs_clip", c.obs_clip, ctx);
-  GetOptional(j, "obs_eps", c.obs_eps, ctx);
-  GetOptional(j, "initial_count", c.initial_count, ctx);
-  if (!(c.obs_clip > 0)) throw ConfigError(ctx + ".obs_clip: must be > 0");
-  if (!(c.obs_eps >= 0)) throw ConfigError(ctx + ".obs_eps: must be >= 0");
-  if (!(c.initial_count >= 0)) throw ConfigError(ctx + ".initial_count: must be >= 0");
-  return c;
+  return NormalizerConfigFields().Read(j, ctx);
 }
 
 ObsNormalizer::ObsNormalizer(int dim, const NormalizerConfig& config)
@@ -149,27 +147,24 @@ void ObsNormalizer::Normalize(const float* raw, float* out) const {
   }
 }
 
-Json ToJson(const RewardScalingConfig& c) {
-  return Json{{"enabled", c.enabled},
-              {"clip", c.clip},
-              {"eps", c.eps},
-              {"reset_at_episode_end", c.reset_at_episode_end},
-              {"initial_count", c.initial_count}};
+const FieldTable<RewardScalingConfig>& RewardScalingConfigFields() {
+  using C = RewardScalingConfig;
+  static const FieldTable<RewardScalingConfig> t =
+      FieldTable<C>()
+          .Add("enabled", &C::enabled, "scale rewards by the running std of the return")
+          .Add("clip", &C::clip, "scaled rewards clipped to +-clip", Positive<float>())
+          .Add("eps", &C::eps, "added to the variance", NonNegative<float>())
+          .Add("reset_at_episode_end", &C::reset_at_episode_end,
+               "reset the return estimate at episode ends (the authors never did)")
+          .Add("initial_count", &C::initial_count, "prior count of the return statistics",
+               NonNegative<double>());
+  return t;
 }
 
+Json ToJson(const RewardScalingConfig& c) { return RewardScalingConfigFields().Write(c); }
+
 RewardScalingConfig RewardScalingConfigFromJson(const Json& j, const std::string& ctx) {
-  if (!j.is_object()) throw ConfigError(ctx + ": expected an object, got " + j.dump());
-  CheckKnownKeys(j, {"enabled", "clip", "eps", "reset_at_episode_end", "initial_count"}, ctx);
-  RewardScalingConfig c;
-  GetOptional(j, "enabled", c.enabled, ctx);
-  GetOptional(j, "clip", c.clip, ctx);
-  GetOptional(j, "eps", c.eps, ctx);
-  GetOptional(j, "reset_at_episode_end", c.reset_at_episode_end, ctx);
-  GetOptional(j, "initial_count", c.initial_count, ctx);
-  if (!(c.initial_count >= 0)) throw ConfigError(ctx + ".initial_count: must be >= 0");
-  if (!(c.clip > 0)) throw ConfigError(ctx + ".clip: must be > 0");
-  if (!(c.eps >= 0)) throw ConfigError(ctx + ".eps: must be >= 0");
-  return c;
+  return RewardScalingConfigFields().Read(j, ctx);
 }
 
 RewardScaler::RewardScaler(const RewardScalingConfig& config, float gamma)

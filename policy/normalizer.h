@@ -12,6 +12,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "common/field_table.h"
 #include "common/json_util.h"
 
 namespace perch {
@@ -60,6 +61,7 @@ struct NormalizerConfig {
   float obs_eps = 1e-8f;      // added to var
   double initial_count = 1e-4;
 };
+const FieldTable<NormalizerConfig>& NormalizerConfigFields();
 Json ToJson(const NormalizerConfig& c);
 NormalizerConfig NormalizerConfigFromJson(const Json& j, const std::string& ctx);
 
@@ -97,6 +99,7 @@ struct RewardScalingConfig {
   bool reset_at_episode_end = false;  // authors never reset the return estimate (notes §9.6)
   double initial_count = 1e-4;        // prior of the return statistics (mean 0, var 1)
 };
+const FieldTable<RewardScalingConfig>& RewardScalingConfigFields();
 Json ToJson(const RewardScalingConfig& c);
 RewardScalingConfig RewardScalingConfigFromJson(const Json& j, const std::string& ctx);
 

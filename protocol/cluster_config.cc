@@ -7,176 +7,133 @@
 
 namespace perch {
 
-Json ToJson(const ClusterConfig& c) {
-  return Json{{"task", c.task},
-              {"segment_steps", c.segment_steps},
-              {"envs_per_actor", c.envs_per_actor},
-              {"max_policy_lag", c.max_policy_lag},
-              {"checkpoint_every", c.checkpoint_every},
-              {"keep_last", c.keep_last},
-              {"milestone_every", c.milestone_every},
-              {"heartbeat_s", c.heartbeat_s},
-              {"actor_timeout_s", c.actor_timeout_s},
-              {"max_message_bytes", c.max_message_bytes},
-              {"max_segment_steps", c.max_segment_steps},
-              {"max_wire_value", c.max_wire_value},
-              {"reconnect_ivl_ms", c.reconnect_ivl_ms},
-              {"hierarchy_meta_period", c.hierarchy_meta_period},
-              {"hierarchy_enabled", c.hierarchy_enabled},
-              {"restart_backoff_ms", c.restart_backoff_ms},
-              {"restart_backoff_max_ms", c.restart_backoff_max_ms},
-              {"max_identical_failures", c.max_identical_failures},
-              {"learner_watchdog_s", c.learner_watchdog_s},
-              {"learner_queue_segments", c.learner_queue_segments},
-              {"init_from", c.init_from},
-              {"init_mirror", c.init_mirror},
-              {"max_samples", c.max_samples},
-              {"target_success", c.target_success},
-              {"target_window", c.target_window},
-              {"credit_slack", c.credit_slack},
-              {"credit_regrant_s", c.credit_regrant_s},
-              {"simulated_lag", c.simulated_lag},
-              {"insecure", c.insecure},
-              {"keys_dir", c.keys_dir},
-              {"learners", c.learners},
-              {"group_address", c.group_address},
-              {"group_timeout_s", c.group_timeout_s}};
+namespace {
+
+// The message the hand-written checks gave: "CTX.field: MESSAGE".
+std::string Fail(const std::string& ctx, const char* field, const std::string& what) {
+  return ctx + "." + field + ": " + what;
 }
 
-namespace {
-void CheckMin(const std::string& ctx, const char* field, double v, double lo) {
-  if (v < lo) {
-    throw ConfigError(ctx + "." + field + ": must be >= " + std::to_string(lo) + ", got " +
-                      std::to_string(v));
-  }
-}
 }  // namespace
 
+const FieldTable<ClusterConfig>& ClusterConfigFields() {
+  using C = ClusterConfig;
+  static const FieldTable<ClusterConfig> t =
+      FieldTable<C>()
+          .Custom(
+              "task", "the policy trained: a subtask, meta or stand",
+              [](const Json& j, C& c, const std::string& ctx) {
+                GetOptional(j, "task", c.task, ctx);
+                c.task = TaskName(TaskFromName(c.task, ctx + ".task"));  // one spelling
+              },
+              [](const C& c, Json& j) { j["task"] = c.task; })
+          .Add("segment_steps", &C::segment_steps, "T: control steps per rollout segment",
+               AtLeast<int>(1))
+          .Add("envs_per_actor", &C::envs_per_actor, "default for `perch actor --envs`",
+               AtLeast<int>(1))
+          .Add("max_policy_lag", &C::max_policy_lag,
+               "segments from versions older than current - lag are dropped", AtLeast<int>(0))
+          .Add("checkpoint_every", &C::checkpoint_every, "updates between checkpoints",
+               AtLeast<int>(1))
+          .Add("keep_last", &C::keep_last, "rotated checkpoints kept", AtLeast<int>(1))
+          .Add("milestone_every", &C::milestone_every,
+               "updates; checkpoints at multiples are kept forever (0: none)", AtLeast<int>(0))
+          .Add("heartbeat_s", &C::heartbeat_s, "actor -> learner heartbeat period",
+               AtLeast<double>(0.01))
+          .Add("actor_timeout_s", &C::actor_timeout_s,
+               "an actor silent this long is counted as gone", AtLeast<double>(0.01))
+          .Add("max_message_bytes", &C::max_message_bytes, "bigger messages are dropped unparsed",
+               AtLeast<int>(1024))
+          .Add("max_segment_steps", &C::max_segment_steps, "T above this is rejected",
+               AtLeast<int>(1))
+          .Add("max_wire_value", &C::max_wire_value, "|x| above this in a segment is rejected",
+               Satisfies<double>([](const double& v) { return v > 0 && std::isfinite(v); },
+                                 "must be finite and > 0"))
+          .Add("reconnect_ivl_ms", &C::reconnect_ivl_ms, "ZeroMQ reconnect interval",
+               AtLeast<int>(1))
+          .Add("hierarchy_meta_period", &C::hierarchy_meta_period,
+               "control steps per meta decision", AtLeast<int>(1))
+          .Add("hierarchy_enabled", &C::hierarchy_enabled,
+               "run the 2 Hz meta policy over the subtasks")
+          .Add("restart_backoff_ms", &C::restart_backoff_ms,
+               "a dead child is restarted after this, doubling per failure in a row",
+               AtLeast<int>(0))
+          .Add("restart_backoff_max_ms", &C::restart_backoff_max_ms, "the backoff's ceiling")
+          .Add("max_identical_failures", &C::max_identical_failures,
+               "failures in a row with the same status before giving up (0: never)",
+               AtLeast<int>(0))
+          .Add("learner_watchdog_s", &C::learner_watchdog_s,
+               "a learner without an update this long is reported (0: no watchdog)",
+               AtLeast<double>(0))
+          .Add("learner_queue_segments", &C::learner_queue_segments,
+               "segments queued per actor connection at the learner", AtLeast<int>(1))
+          .Add("init_from", &C::init_from,
+               "a new run starts from this checkpoint's policy and normalizer (empty: scratch)")
+          .Add("init_mirror", &C::init_mirror, "init_from is the mirror-image task's policy")
+          .Add("max_samples", &C::max_samples, "the run ends after this many samples (0: none)",
+               Satisfies<int64_t>([](const int64_t& v) { return v >= 0; },
+                                  "must be >= 0 (0: no budget)"))
+          .Add("target_success", &C::target_success,
+               "the run ends at this success rate over target_window episodes (0: none)",
+               Satisfies<double>([](const double& v) { return v >= 0.0 && v <= 1.0; },
+                                 "must be in [0, 1] (0: no target)"))
+          .Add("target_window", &C::target_window, "episodes judged for target_success",
+               AtLeast<int>(1))
+          .Add("credit_slack", &C::credit_slack,
+               "flow control: credit beyond the next batch's need (0: no flow control)",
+               Satisfies<double>([](const double& v) { return v >= 0.0 && v <= 100.0; },
+                                 "must be in [0, 100] (0: no flow control)"))
+          .Add("credit_regrant_s", &C::credit_regrant_s,
+               "a learner that heard nothing this long grants again", AtLeast<double>(0.01))
+          .Add("simulated_lag", &C::simulated_lag,
+               "actors act with weights up to this many versions old (0: off)", AtLeast<int>(0))
+          .Add("insecure", &C::insecure, "no CURVE keys: for a trusted network only")
+          .Add("keys_dir", &C::keys_dir, "CURVE keys (else $PERCH_KEYS_DIR)")
+          .Add("learners", &C::learners, "learner processes in a DD-PPO group",
+               Satisfies<int>([](const int& v) { return v >= 1 && v <= 64; }, "must be in 1..64")
+                   .WithValue())
+          .Add("group_address", &C::group_address, "rank 0 binds it, the others connect")
+          .Add("group_timeout_s", &C::group_timeout_s,
+               "a group operation not completed on every member within this fails",
+               AtLeast<double>(1.0))
+          .Rule([](const C& c, const std::string& ctx) {
+            if (c.envs_per_actor > 1024) {
+              // Each env is a Bullet world (~1 MB) stepped in turn on one core: thousands are a
+              // mistake (1e9 made the actor crash at 1.5 GB).
+              return Fail(ctx, "envs_per_actor",
+                          std::to_string(c.envs_per_actor) +
+                              " is more than 1024 (one actor steps its envs on one core; add "
+                              "actors)");
+            }
+            if (c.restart_backoff_max_ms < c.restart_backoff_ms) {
+              return Fail(ctx, "restart_backoff_max_ms",
+                          "must be >= " + std::to_string(double(c.restart_backoff_ms)) + ", got " +
+                              std::to_string(double(c.restart_backoff_max_ms)));
+            }
+            if (c.init_mirror && c.init_from.empty()) {
+              return Fail(ctx, "init_mirror", "needs cluster.init_from (the policy to mirror)");
+            }
+            if (c.simulated_lag > c.max_policy_lag) {
+              // Every segment drawn past the learner's window would be dropped as stale.
+              return Fail(ctx, "simulated_lag",
+                          std::to_string(c.simulated_lag) + " exceeds max_policy_lag " +
+                              std::to_string(c.max_policy_lag));
+            }
+            if (c.segment_steps > c.max_segment_steps) {
+              return Fail(ctx, "segment_steps",
+                          std::to_string(c.segment_steps) + " exceeds max_segment_steps " +
+                              std::to_string(c.max_segment_steps));
+            }
+            if (c.learners > 1) CheckEndpoint(c.group_address, ctx + ".group_address");
+            return std::string();
+          });
+  return t;
+}
+
+Json ToJson(const ClusterConfig& c) { return ClusterConfigFields().Write(c); }
+
 ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx) {
-  CheckKnownKeys(j,
-                 {"task",
-                  "segment_steps",
-                  "envs_per_actor",
-                  "max_policy_lag",
-                  "checkpoint_every",
-                  "keep_last",
-                  "milestone_every",
-                  "heartbeat_s",
-                  "actor_timeout_s",
-                  "max_message_bytes",
-                  "max_segment_steps",
-                  "max_wire_value",
-                  "reconnect_ivl_ms",
-                  "hierarchy_meta_period",
-                  "hierarchy_enabled",
-                  "restart_backoff_ms",
-                  "restart_backoff_max_ms",
-                  "max_identical_failures",
-                  "learner_watchdog_s",
-                  "learner_queue_segments",
-                  "init_from",
-                  "init_mirror",
-                  "max_samples",
-                  "target_success",
-                  "target_window",
-                  "credit_slack",
-                  "credit_regrant_s",
-                  "simulated_lag",
-                  "insecure",
-                  "keys_dir",
-                  "learners",
-                  "group_address",
-                  "group_timeout_s"},
-                 ctx);
-  ClusterConfig c;
-  GetOptional(j, "task", c.task, ctx);
-  GetOptional(j, "segment_steps", c.segment_steps, ctx);
-  GetOptional(j, "envs_per_actor", c.envs_per_actor, ctx);
-  GetOptional(j, "max_policy_lag", c.max_policy_lag, ctx);
-  GetOptional(j, "checkpoint_every", c.checkpoint_every, ctx);
-  GetOptional(j, "keep_last", c.keep_last, ctx);
-  GetOptional(j, "milestone_every", c.milestone_every, ctx);
-  GetOptional(j, "heartbeat_s", c.heartbeat_s, ctx);
-  GetOptional(j, "actor_timeout_s", c.actor_timeout_s, ctx);
-  GetOptional(j, "max_message_bytes", c.max_message_bytes, ctx);
-  GetOptional(j, "max_segment_steps", c.max_segment_steps, ctx);
-  GetOptional(j, "max_wire_value", c.max_wire_value, ctx);
-  GetOptional(j, "reconnect_ivl_ms", c.reconnect_ivl_ms, ctx);
-  GetOptional(j, "hierarchy_meta_period", c.hierarchy_meta_period, ctx);
-  GetOptional(j, "hierarchy_enabled", c.hierarchy_enabled, ctx);
-  GetOptional(j, "restart_backoff_ms", c.restart_backoff_ms, ctx);
-  GetOptional(j, "restart_backoff_max_ms", c.restart_backoff_max_ms, ctx);
-  GetOptional(j, "max_identical_failures", c.max_identical_failures, ctx);
-  GetOptional(j, "learner_watchdog_s", c.learner_watchdog_s, ctx);
-  GetOptional(j, "learner_queue_segments", c.learner_queue_segments, ctx);
-  GetOptional(j, "init_from", c.init_from, ctx);
-  GetOptional(j, "init_mirror", c.init_mirror, ctx);
-  GetOptional(j, "max_samples", c.max_samples, ctx);
-  GetOptional(j, "target_success", c.target_success, ctx);
-  GetOptional(j, "target_window", c.target_window, ctx);
-  GetOptional(j, "credit_slack", c.credit_slack, ctx);
-  GetOptional(j, "credit_regrant_s", c.credit_regrant_s, ctx);
-  GetOptional(j, "simulated_lag", c.simulated_lag, ctx);
-  GetOptional(j, "insecure", c.insecure, ctx);
-  GetOptional(j, "keys_dir", c.keys_dir, ctx);
-  GetOptional(j, "learners", c.learners, ctx);
-  GetOptional(j, "group_address", c.group_address, ctx);
-  GetOptional(j, "group_timeout_s", c.group_timeout_s, ctx);
-  c.task = TaskName(TaskFromName(c.task, ctx + ".task"));  // one spelling from here on
-  CheckMin(ctx, "segment_steps", c.segment_steps, 1);
-  CheckMin(ctx, "envs_per_actor", c.envs_per_actor, 1);
-  // Each env is a Bullet world (~1 MB) stepped in turn on one core: thousands are a mistake (1e9
-  // made the actor crash at 1.5 GB).
-  if (c.envs_per_actor > 1024) {
-    throw ConfigError(ctx + ".envs_per_actor: " + std::to_string(c.envs_per_actor) +
-                      " is more than 1024 (one actor steps its envs on one core; add actors)");
-  }
-  CheckMin(ctx, "max_policy_lag", c.max_policy_lag, 0);
-  CheckMin(ctx, "checkpoint_every", c.checkpoint_every, 1);
-  CheckMin(ctx, "keep_last", c.keep_last, 1);
-  CheckMin(ctx, "milestone_every", c.milestone_every, 0);
-  CheckMin(ctx, "heartbeat_s", c.heartbeat_s, 0.01);
-  CheckMin(ctx, "actor_timeout_s", c.actor_timeout_s, 0.01);
-  CheckMin(ctx, "max_message_bytes", c.max_message_bytes, 1024);
-  CheckMin(ctx, "max_segment_steps", c.max_segment_steps, 1);
-  if (!(c.max_wire_value > 0 && std::isfinite(c.max_wire_value))) {
-    throw ConfigError(ctx + ".max_wire_value: must be finite and > 0");
-  }
-  CheckMin(ctx, "reconnect_ivl_ms", c.reconnect_ivl_ms, 1);
-  CheckMin(ctx, "hierarchy_meta_period", c.hierarchy_meta_period, 1);
-  CheckMin(ctx, "restart_backoff_ms", c.restart_backoff_ms, 0);
-  CheckMin(ctx, "restart_backoff_max_ms", c.restart_backoff_max_ms, c.restart_backoff_ms);
-  CheckMin(ctx, "max_identical_failures", c.max_identical_failures, 0);
-  CheckMin(ctx, "learner_watchdog_s", c.learner_watchdog_s, 0);
-  CheckMin(ctx, "learner_queue_segments", c.learner_queue_segments, 1);
-  if (c.init_mirror && c.init_from.empty()) {
-    throw ConfigError(ctx + ".init_mirror: needs cluster.init_from (the policy to mirror)");
-  }
-  if (c.max_samples < 0) throw ConfigError(ctx + ".max_samples: must be >= 0 (0: no budget)");
-  if (!(c.target_success >= 0.0 && c.target_success <= 1.0)) {
-    throw ConfigError(ctx + ".target_success: must be in [0, 1] (0: no target)");
-  }
-  CheckMin(ctx, "target_window", c.target_window, 1);
-  if (!(c.credit_slack >= 0.0 && c.credit_slack <= 100.0)) {
-    throw ConfigError(ctx + ".credit_slack: must be in [0, 100] (0: no flow control)");
-  }
-  CheckMin(ctx, "credit_regrant_s", c.credit_regrant_s, 0.01);
-  CheckMin(ctx, "simulated_lag", c.simulated_lag, 0);
-  if (c.simulated_lag > c.max_policy_lag) {
-    // Every segment drawn past the learner's window would be dropped as stale.
-    throw ConfigError(ctx + ".simulated_lag: " + std::to_string(c.simulated_lag) +
-                      " exceeds max_policy_lag " + std::to_string(c.max_policy_lag));
-  }
-  if (c.learners < 1 || c.learners > 64) {
-    throw ConfigError(ctx + ".learners: must be in 1..64, got " + std::to_string(c.learners));
-  }
-  CheckMin(ctx, "group_timeout_s", c.group_timeout_s, 1.0);
-  if (c.learners > 1) CheckEndpoint(c.group_address, ctx + ".group_address");
-  if (c.segment_steps > c.max_segment_steps) {
-    throw ConfigError(ctx + ".segment_steps: " + std::to_string(c.segment_steps) +
-                      " exceeds max_segment_steps " + std::to_string(c.max_segment_steps));
-  }
-  return c;
+  return ClusterConfigFields().Read(j, ctx);
 }
 
 proto::Task TaskFromName(const std::string& name, const std::string& ctx) {

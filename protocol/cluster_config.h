@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <string>
 
+#include "common/field_table.h"
 #include "common/json_util.h"
 #include "common/proto/wire.pb.h"
 
@@ -85,6 +86,7 @@ struct ClusterConfig {
   double group_timeout_s = 600.0;
 };
 
+const FieldTable<ClusterConfig>& ClusterConfigFields();
 Json ToJson(const ClusterConfig& c);
 ClusterConfig ClusterConfigFromJson(const Json& j, const std::string& ctx);
 

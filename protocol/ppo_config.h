@@ -56,6 +56,7 @@ struct PpoConfig {
   static PpoConfig Subtask();  // 8192 / 32 / 4 / 1e-4
   static PpoConfig Meta();     // 64 / 8 / 2 / 1e-4
 };
+const FieldTable<PpoConfig>& PpoConfigFields();
 Json ToJson(const PpoConfig& c);
 // The learning rate after `samples` samples of the run (lr_schedule, else learning_rate).
 float LearningRateAt(const PpoConfig& c, int64_t samples);

@@ -507,9 +507,9 @@ std::string ExtensionMismatch(const Json& prev, const Json& next, int64_t sample
     if (p >= samples) continue;
     const double ra = RateAt(a, p), rb = RateAt(b, p);
     if (ra != rb) {
-      return "the learning rate at " + std::to_string(p) + " samples changed (" +
-             Json(ra).dump() + " -> " + Json(rb).dump() + "), before the " +
-             std::to_string(samples) + " samples it has trained";
+      return "the learning rate at " + std::to_string(p) + " samples changed (" + Json(ra).dump() +
+             " -> " + Json(rb).dump() + "), before the " + std::to_string(samples) +
+             " samples it has trained";
     }
   }
   return "";

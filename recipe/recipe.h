@@ -152,9 +152,9 @@ std::vector<std::string> StagesReading(const Recipe& r, const std::string& name)
 
 // --extend: whether the composed config `next` continues a training run made under `prev` that
 // has trained `samples` samples: continuing it trains what a fresh start under `next` would
-// have (up to the run's own randomness). Only the budget (cluster.max_samples, at least `samples`) and the learning
-// rate after `samples` (ppo.learning_rate with ppo.lr_schedule: equal at every sample count below
-// `samples`) may differ. Returns "" when it continues, else what differs.
+// have (up to the run's own randomness). Only the budget (cluster.max_samples, at least `samples`)
+// and the learning rate after `samples` (ppo.learning_rate with ppo.lr_schedule: equal at every
+// sample count below `samples`) may differ. Returns "" when it continues, else what differs.
 std::string ExtensionMismatch(const Json& prev, const Json& next, int64_t samples);
 
 // Stages to be redone: those whose recorded fingerprint differs from `fingerprints` (done,

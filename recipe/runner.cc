@@ -670,8 +670,8 @@ void Runner::Extend(const std::string& name) {
     if (it != state_.stages.end() && it->second.state != "pending") readers.push_back(n);
   }
   std::cerr << "[recipe] " << name << ": extended: continues from its newest checkpoint ("
-            << trained << " samples) to " << next["cluster"]["max_samples"].dump()
-            << " samples; " << readers.size() << " stage(s) that read it are redone\n";
+            << trained << " samples) to " << next["cluster"]["max_samples"].dump() << " samples; "
+            << readers.size() << " stage(s) that read it are redone\n";
   if (f_.check) {
     for (const std::string& n : readers) state_.stages.erase(n);  // in memory only: the plan
   } else {

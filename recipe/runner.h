@@ -15,8 +15,8 @@ struct RecipeRunFlags {
   std::string recipe;  // the recipe file
   std::string dir;     // D
   RecipeRunOptions options;
-  std::string from, until;   // run only these stages (inclusive); earlier ones must be done
-  std::string force_from;    // accept: this stage and every later one that ran are redone
+  std::string from, until;  // run only these stages (inclusive); earlier ones must be done
+  std::string force_from;   // accept: this stage and every later one that ran are redone
   // Accept a training stage's larger budget (and learning rates past what it trained): it
   // continues from its newest checkpoint; the stages that read it are redone.
   std::string extend;

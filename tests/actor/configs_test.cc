@@ -136,5 +136,43 @@ TEST(ExperimentConfig, EachSubtaskConfigBuildsItsEnvWithThePapersObservation) {
   }
 }
 
+// The field tables (common/field_table.h) are what a run records: every field of the resolved
+// ppo, cluster and env sections has a row (with its default) and every row is in the resolved
+// config, so `perch config --fields` documents exactly what config.json holds.
+TEST(CommittedConfigs, FieldTablesDescribeExactlyTheResolvedSections) {
+  const std::string path = std::string(PERCH_SOURCE_DIR) + "/configs/default.json";
+  const Json raw = LoadComposedConfig(path);
+  Json resolved = ToJson(LoadExperimentConfig(path));
+  // A run records the env section as written; the env's own resolution fills in the rest.
+  resolved["env"] = TaskEnvConfig::FromJson(resolved["env"], "env").ToJson();
+  const Json tables = ConfigFieldTables();
+  for (const char* section : {"ppo", "cluster", "env"}) {
+    SCOPED_TRACE(section);
+    const Json& values = resolved[section];
+    std::vector<std::string> rows;
+    for (const Json& r : tables[section]) {
+      const std::string name = r["name"];
+      if (name == "_comment") continue;  // accepted, never written
+      // A field written only when set (ppo.lr_schedule) has no default row value.
+      if (r.contains("default") && r["default"].is_null()) continue;
+      rows.push_back(name);
+      ASSERT_TRUE(values.contains(name)) << name;
+      const bool set = raw.contains(section) && raw[section].contains(name);
+      if (r.contains("default")) {
+        // A field the file leaves out is recorded with the table's default.
+        if (!set) {
+          EXPECT_EQ(r["default"], values[name]) << name;
+        }
+      } else {
+        EXPECT_TRUE(values[name].is_object()) << name;
+        EXPECT_EQ(r["fields"].size(), values[name].size()) << name;
+      }
+    }
+    if (std::string(section) != "env") {  // env also holds the task's own sections
+      EXPECT_EQ(rows.size(), values.size());
+    }
+  }
+}
+
 }  // namespace
 }  // namespace perch

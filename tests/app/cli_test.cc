@@ -102,6 +102,29 @@ TEST_F(CliTest, SetAndBaseComposeAndBadOverridesAreNamed) {
   EXPECT_TRUE(Has(r.out, "cluster.target_success: task \"walk\" has no success test")) << r.out;
 }
 
+// perch config --fields prints the field tables: each field with its default, range and doc.
+TEST_F(CliTest, ConfigFieldsListsEachSectionsFieldsWithDefaultsAndRanges) {
+  Result r = Perch("config --fields ppo --json", false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const Json j = Json::parse(r.out);
+  bool found = false;
+  for (const Json& row : j["ppo"]) {
+    if (row["name"] != "learning_rate") continue;
+    found = true;
+    EXPECT_NEAR(row["default"].get<double>(), 1e-4, 1e-9);
+    EXPECT_EQ(row["rule"], "must be > 0");
+  }
+  EXPECT_TRUE(found) << r.out;
+  // Text: nested fields dotted, one per line.
+  r = Perch("config --fields env", false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_TRUE(Has(r.out, "env.physics.substeps")) << r.out;
+  EXPECT_TRUE(Has(r.out, "env.spawn.zone1_deg")) << r.out;
+  r = Perch("config --fields bogus");
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "unknown section \"bogus\"")) << r.out;
+}
+
 TEST_F(CliTest, EvalUsesTheCheckpointsConfigAndWarnsWhenConfigDiffers) {
   // The stage-2 walker's checkpoint knows it walks toward targets: without --config, eval
   // measures that stage, not the forward stage of the defaults.
