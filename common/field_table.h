@@ -138,6 +138,20 @@ class FieldTable {
     return *this;
   }
 
+  // As Custom, but read also when the key is absent (a field whose value sets others' defaults,
+  // such as a reward variant, applies its default too).
+  FieldTable& CustomAlways(const char* name, const char* doc,
+                           std::function<void(const Json& j, T& t, const std::string& ctx)> read,
+                           std::function<void(const T& t, Json& j)> write) {
+    Field f;
+    f.name = name;
+    f.doc = doc;
+    f.read = std::move(read);
+    f.write = std::move(write);
+    fields_.push_back(std::move(f));
+    return *this;
+  }
+
   // A key that is accepted and ignored (a "_comment").
   FieldTable& Ignored(const char* name, const char* doc) {
     Field f;
@@ -146,6 +160,13 @@ class FieldTable {
     f.read = [](const Json&, T&, const std::string&) {};
     f.write = [](const T&, Json&) {};
     fields_.push_back(std::move(f));
+    return *this;
+  }
+
+  // Rows shared by several tables: f(*this) adds them (tasks/config_fields.h).
+  template <class F>
+  FieldTable& With(F f) {
+    f(*this);
     return *this;
   }
 

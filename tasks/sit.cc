@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "common/paths.h"
+#include "tasks/config_fields.h"
 
 namespace perch {
 
@@ -26,159 +27,98 @@ void SitTaskConfig::ApplyVariant(const std::string& variant, const std::string& 
   reward_variant = variant;
 }
 
-SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
-  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(j,
-                 {"reward_variant",
-                  "motion_file",
-                  "similarity",
-                  "approach_weight",
-                  "approach_horizontal",
-                  "hold_phase",
-                  "hold_pose_weight",
-                  "hold_energy_weight",
-                  "hold_contact_weight",
-                  "hold_seat_weight",
-                  "hold_seat_alpha",
-                  "root_pos_weight",
-                  "root_pos_alpha",
-                  "pelvis_path_weight",
-                  "pelvis_path_alpha",
-                  "energy",
-                  "pelvis_end_offset",
-                  "clip_seat_height_m",
-                  "adapt_to_seat_height",
-                  "reference_state_init",
-                  "rsi_max_fraction",
-                  "rsi_zero_joint_speeds",
-                  "min_root_z",
-                  "max_episode_steps",
-                  "start_joint_noise_rad",
-                  "success_contact_s",
-                  "eval_episode_s",
-                  "max_seat_height_m",
-                  "start",
-                  "start_noise_m",
-                  "start_noise_deg",
-                  "start_extra_along_m",
-                  "start_extra_across_m",
-                  "start_extra_yaw_deg"},
-                 ctx);
-  SitTaskConfig c;
-  std::string variant = c.reward_variant;
-  GetOptional(j, "reward_variant", variant, ctx);
-  c.ApplyVariant(variant, ctx);
-  GetOptional(j, "motion_file", c.motion_file, ctx);
-  if (j.contains("similarity")) {
-    c.similarity =
-        SimilarityRewardConfig::FromJson(j["similarity"], ctx + ".similarity", c.similarity);
-  }
-  GetOptional(j, "approach_weight", c.approach_weight, ctx);
-  GetOptional(j, "approach_horizontal", c.approach_horizontal, ctx);
-  GetOptional(j, "hold_phase", c.hold_phase, ctx);
-  GetOptional(j, "hold_pose_weight", c.hold_pose_weight, ctx);
-  GetOptional(j, "hold_energy_weight", c.hold_energy_weight, ctx);
-  GetOptional(j, "hold_contact_weight", c.hold_contact_weight, ctx);
-  GetOptional(j, "hold_seat_weight", c.hold_seat_weight, ctx);
-  GetOptional(j, "hold_seat_alpha", c.hold_seat_alpha, ctx);
-  GetOptional(j, "root_pos_weight", c.root_pos_weight, ctx);
-  GetOptional(j, "pelvis_path_weight", c.pelvis_path_weight, ctx);
-  GetOptional(j, "pelvis_path_alpha", c.pelvis_path_alpha, ctx);
-  GetOptional(j, "root_pos_alpha", c.root_pos_alpha, ctx);
-  if (j.contains("energy")) c.energy = EnergyCostConfig::FromJson(j["energy"], ctx + ".energy");
-  GetOptional(j, "pelvis_end_offset", c.pelvis_end_offset, ctx);
-  GetOptional(j, "clip_seat_height_m", c.clip_seat_height_m, ctx);
-  GetOptional(j, "adapt_to_seat_height", c.adapt_to_seat_height, ctx);
-  if (!(c.clip_seat_height_m > 0 && c.clip_seat_height_m < 1.0)) {
-    throw ConfigError(ctx + ".clip_seat_height_m: must be in (0, 1) m");
-  }
-  GetOptional(j, "reference_state_init", c.reference_state_init, ctx);
-  GetOptional(j, "rsi_max_fraction", c.rsi_max_fraction, ctx);
-  GetOptional(j, "rsi_zero_joint_speeds", c.rsi_zero_joint_speeds, ctx);
-  GetOptional(j, "min_root_z", c.min_root_z, ctx);
-  GetOptional(j, "max_episode_steps", c.max_episode_steps, ctx);
-  GetOptional(j, "start_joint_noise_rad", c.start_joint_noise_rad, ctx);
-  if (!(c.start_joint_noise_rad >= 0 && c.start_joint_noise_rad <= 0.5)) {
-    throw ConfigError(ctx + ".start_joint_noise_rad: must be in [0, 0.5] rad");
-  }
-  GetOptional(j, "success_contact_s", c.success_contact_s, ctx);
-  GetOptional(j, "eval_episode_s", c.eval_episode_s, ctx);
-  GetOptional(j, "max_seat_height_m", c.max_seat_height_m, ctx);
-  if (j.contains("start")) c.start = BankStartConfig::FromJson(j["start"], ctx + ".start");
-  GetOptional(j, "start_noise_m", c.start_noise_m, ctx);
-  GetOptional(j, "start_noise_deg", c.start_noise_deg, ctx);
-  if (!(c.start_noise_m[0] >= 0 && c.start_noise_m[1] >= 0 && c.start_noise_deg >= 0)) {
-    throw ConfigError(ctx + ".start_noise_m/start_noise_deg: must be >= 0");
-  }
-  GetOptional(j, "start_extra_along_m", c.start_extra_along_m, ctx);
-  GetOptional(j, "start_extra_across_m", c.start_extra_across_m, ctx);
-  GetOptional(j, "start_extra_yaw_deg", c.start_extra_yaw_deg, ctx);
-  if (!(c.start_extra_along_m[0] <= c.start_extra_along_m[1] &&
-        std::abs(c.start_extra_along_m[0]) <= 2.0 && std::abs(c.start_extra_along_m[1]) <= 2.0)) {
-    throw ConfigError(ctx + ".start_extra_along_m: expected [lo, hi] with lo <= hi, within +-2 m");
-  }
-  if (!(c.start_extra_across_m >= 0 && c.start_extra_across_m <= 2.0)) {
-    throw ConfigError(ctx + ".start_extra_across_m: must be in [0, 2] m");
-  }
-  if (!(c.start_extra_yaw_deg >= 0 && c.start_extra_yaw_deg <= 180.0)) {
-    throw ConfigError(ctx + ".start_extra_yaw_deg: must be in [0, 180] deg");
-  }
-  if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
-  if (!(c.rsi_max_fraction >= 0 && c.rsi_max_fraction <= 1)) {
-    throw ConfigError(ctx + ".rsi_max_fraction: must be in [0, 1]");
-  }
-  if (!(c.success_contact_s > 0)) throw ConfigError(ctx + ".success_contact_s: must be > 0");
-  if (!(c.eval_episode_s > 0)) throw ConfigError(ctx + ".eval_episode_s: must be > 0");
-  if (!(c.max_seat_height_m > 0)) throw ConfigError(ctx + ".max_seat_height_m: must be > 0");
-  for (double w : {c.approach_weight, c.hold_pose_weight, c.hold_energy_weight,
-                   c.hold_contact_weight, c.hold_seat_weight, c.hold_seat_alpha, c.root_pos_weight,
-                   c.root_pos_alpha, c.pelvis_path_weight, c.pelvis_path_alpha}) {
-    if (!(w >= 0)) throw ConfigError(ctx + ": reward weights must be >= 0");
-  }
-  for (double v : c.pelvis_end_offset) {
-    if (!std::isfinite(v) || std::abs(v) > 1.0) {
-      throw ConfigError(ctx + ".pelvis_end_offset: each value must be within +-1 m");
-    }
-  }
-  return c;
+namespace {
+
+FieldRule<double> Weight() {
+  return Satisfies<double>([](const double& w) { return w >= 0; }, "must be >= 0");
+}
+FieldRule<double> Between(double lo, double hi, const std::string& rule) {
+  return Satisfies<double>([lo, hi](const double& v) { return v >= lo && v <= hi; }, rule);
 }
 
-Json SitTaskConfig::ToJson() const {
-  return Json{{"reward_variant", reward_variant},
-              {"motion_file", motion_file},
-              {"similarity", similarity.ToJson()},
-              {"approach_weight", approach_weight},
-              {"approach_horizontal", approach_horizontal},
-              {"hold_phase", hold_phase},
-              {"hold_pose_weight", hold_pose_weight},
-              {"hold_energy_weight", hold_energy_weight},
-              {"hold_contact_weight", hold_contact_weight},
-              {"hold_seat_weight", hold_seat_weight},
-              {"hold_seat_alpha", hold_seat_alpha},
-              {"root_pos_weight", root_pos_weight},
-              {"root_pos_alpha", root_pos_alpha},
-              {"pelvis_path_weight", pelvis_path_weight},
-              {"pelvis_path_alpha", pelvis_path_alpha},
-              {"energy", energy.ToJson()},
-              {"pelvis_end_offset", pelvis_end_offset},
-              {"clip_seat_height_m", clip_seat_height_m},
-              {"adapt_to_seat_height", adapt_to_seat_height},
-              {"reference_state_init", reference_state_init},
-              {"rsi_max_fraction", rsi_max_fraction},
-              {"rsi_zero_joint_speeds", rsi_zero_joint_speeds},
-              {"min_root_z", min_root_z},
-              {"max_episode_steps", max_episode_steps},
-              {"start_joint_noise_rad", start_joint_noise_rad},
-              {"success_contact_s", success_contact_s},
-              {"eval_episode_s", eval_episode_s},
-              {"max_seat_height_m", max_seat_height_m},
-              {"start", start.ToJson()},
-              {"start_noise_m", start_noise_m},
-              {"start_noise_deg", start_noise_deg},
-              {"start_extra_along_m", start_extra_along_m},
-              {"start_extra_across_m", start_extra_across_m},
-              {"start_extra_yaw_deg", start_extra_yaw_deg}};
+}  // namespace
+
+const FieldTable<SitTaskConfig>& SitTaskConfigFields() {
+  using C = SitTaskConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          // First: the variant sets the defaults of the fields below.
+          .With(RewardVariantField<C>)
+          .Add("motion_file", &C::motion_file, "the sit clip")
+          .With(SimilarityField<C>)
+          .Add("approach_weight", &C::approach_weight, "Eq. 7 weight [per m/s]", Weight())
+          .Add("approach_horizontal", &C::approach_horizontal, "Eq. 7 in the horizontal plane")
+          .Add("hold_phase", &C::hold_phase, "after the clip ends: the hold terms (authors)")
+          .Add("hold_pose_weight", &C::hold_pose_weight, "hold: pose term", Weight())
+          .Add("hold_energy_weight", &C::hold_energy_weight, "hold: energy term", Weight())
+          .Add("hold_contact_weight", &C::hold_contact_weight, "hold: seat contact", Weight())
+          .Add("hold_seat_weight", &C::hold_seat_weight, "hold: pelvis at the seat target",
+               Weight())
+          .Add("hold_seat_alpha", &C::hold_seat_alpha, "[1/m^2]", Weight())
+          .Add("root_pos_weight", &C::root_pos_weight, "root follows the placed clip", Weight())
+          .Add("root_pos_alpha", &C::root_pos_alpha, "[1/m^2]", Weight())
+          .Add("pelvis_path_weight", &C::pelvis_path_weight, "pelvis follows the placed clip (3-D)",
+               Weight())
+          .Add("pelvis_path_alpha", &C::pelvis_path_alpha, "[1/m^2]", Weight())
+          .With(EnergyField<C>)
+          .Add("pelvis_end_offset", &C::pelvis_end_offset,
+               "the clip's end pelvis placed this far from the seat target [m]",
+               Satisfies<std::array<double, 2>>(
+                   [](const std::array<double, 2>& o) {
+                     for (double v : o) {
+                       if (!std::isfinite(v) || std::abs(v) > 1.0) return false;
+                     }
+                     return true;
+                   },
+                   "each value must be within +-1 m"))
+          .Add("clip_seat_height_m", &C::clip_seat_height_m, "the clip's seat height [m]",
+               Satisfies<double>([](const double& v) { return v > 0 && v < 1.0; },
+                                 "must be in (0, 1) m"))
+          .Add("adapt_to_seat_height", &C::adapt_to_seat_height,
+               "the clip's descent follows the chair's seat")
+          .Add("reference_state_init", &C::reference_state_init, "starts along the clip")
+          .Add("rsi_max_fraction", &C::rsi_max_fraction, "latest start along the clip",
+               Between(0, 1, "must be in [0, 1]"))
+          .Add("rsi_zero_joint_speeds", &C::rsi_zero_joint_speeds, "clip starts at rest")
+          .Add("min_root_z", &C::min_root_z, "early termination below [m]")
+          .Add("max_episode_steps", &C::max_episode_steps, "time limit [control steps]",
+               Satisfies<int>([](const int& v) { return v >= 1; }, "must be >= 1"))
+          .Add("start_joint_noise_rad", &C::start_joint_noise_rad, "start pose noise [rad]",
+               Between(0, 0.5, "must be in [0, 0.5] rad"))
+          .Add("success_contact_s", &C::success_contact_s, "seated this long: success [s]",
+               Positive<double>())
+          .Add("eval_episode_s", &C::eval_episode_s, "evaluation episode length [s]",
+               Positive<double>())
+          .Add("max_seat_height_m", &C::max_seat_height_m, "chairs above are refused [m]",
+               Positive<double>())
+          .With(StartField<C>)
+          .Add("start_noise_m", &C::start_noise_m, "start position noise [m]")
+          .Add("start_noise_deg", &C::start_noise_deg, "start heading noise [deg]")
+          .Add("start_extra_along_m", &C::start_extra_along_m,
+               "[lo, hi] extra start distance along the approach [m]",
+               Satisfies<std::array<double, 2>>(
+                   [](const std::array<double, 2>& v) {
+                     return v[0] <= v[1] && std::abs(v[0]) <= 2.0 && std::abs(v[1]) <= 2.0;
+                   },
+                   "expected [lo, hi] with lo <= hi, within +-2 m"))
+          .Add("start_extra_across_m", &C::start_extra_across_m, "extra start offset across [m]",
+               Between(0, 2.0, "must be in [0, 2] m"))
+          .Add("start_extra_yaw_deg", &C::start_extra_yaw_deg, "extra start heading [deg]",
+               Between(0, 180.0, "must be in [0, 180] deg"))
+          .Rule([](const C& c, const std::string& ctx) {
+            if (!(c.start_noise_m[0] >= 0 && c.start_noise_m[1] >= 0 && c.start_noise_deg >= 0)) {
+              return ctx + ".start_noise_m/start_noise_deg: must be >= 0";
+            }
+            return std::string();
+          });
+  return t;
 }
+
+SitTaskConfig SitTaskConfig::FromJson(const Json& j, const std::string& ctx) {
+  return SitTaskConfigFields().Read(j, ctx);
+}
+
+Json SitTaskConfig::ToJson() const { return SitTaskConfigFields().Write(*this); }
 
 SitTask::SitTask(const SitTaskConfig& config, double control_dt)
     : ClipTask(ResolveProjectPath(config.motion_file), control_dt), c_(config) {}

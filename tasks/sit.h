@@ -9,6 +9,7 @@
 
 #include <string>
 
+#include "common/field_table.h"
 #include "common/json_util.h"
 #include "tasks/clip_task.h"
 
@@ -97,6 +98,8 @@ struct SitTaskConfig {
   static SitTaskConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;
 };
+// Every field of the "sit" section, written once (common/field_table.h).
+const FieldTable<SitTaskConfig>& SitTaskConfigFields();
 
 struct SitTerms {
   double pose = 0, joint_vel = 0, similarity = 0, approach = 0, energy = 0, contact = 0, seat = 0,

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "common/paths.h"
+#include "tasks/config_fields.h"
 
 namespace perch {
 
@@ -30,129 +31,70 @@ void TurnTaskConfig::ApplyVariant(const std::string& variant, const std::string&
   reward_variant = variant;
 }
 
-TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
-                                        const std::string& task) {
-  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(j,
-                 {"reward_variant",
-                  "motion_file",
-                  "similarity",
-                  "rot_weight",
-                  "rot_alpha",
-                  "root_vel_weight",
-                  "root_vel_alpha",
-                  "hold_phase",
-                  "hold_pose_weight",
-                  "hold_energy_weight",
-                  "hold_yaw_weight",
-                  "hold_yaw_alpha",
-                  "hold_still_weight",
-                  "hold_still_alpha",
-                  "energy",
-                  "yaw_offset_max_deg",
-                  "rsi_prob",
-                  "rsi_max_fraction",
-                  "min_root_z",
-                  "max_yaw_error_deg",
-                  "max_episode_steps",
-                  "start_joint_noise_rad",
-                  "success_after_end_s",
-                  "success_yaw_tol_deg",
-                  "start",
-                  "heading_goal",
-                  "heading_lookahead_s"},
-                 ctx);
-  TurnTaskConfig c;
-  c.motion_file = "data/motions/" + task + ".json";
-  std::string variant = c.reward_variant;
-  GetOptional(j, "reward_variant", variant, ctx);
-  c.ApplyVariant(variant, ctx);
-  GetOptional(j, "motion_file", c.motion_file, ctx);
-  if (j.contains("similarity")) {
-    c.similarity =
-        SimilarityRewardConfig::FromJson(j["similarity"], ctx + ".similarity", c.similarity);
-  }
-  GetOptional(j, "rot_weight", c.rot_weight, ctx);
-  GetOptional(j, "rot_alpha", c.rot_alpha, ctx);
-  GetOptional(j, "root_vel_weight", c.root_vel_weight, ctx);
-  GetOptional(j, "root_vel_alpha", c.root_vel_alpha, ctx);
-  GetOptional(j, "hold_phase", c.hold_phase, ctx);
-  GetOptional(j, "hold_pose_weight", c.hold_pose_weight, ctx);
-  GetOptional(j, "hold_energy_weight", c.hold_energy_weight, ctx);
-  GetOptional(j, "hold_yaw_weight", c.hold_yaw_weight, ctx);
-  GetOptional(j, "hold_yaw_alpha", c.hold_yaw_alpha, ctx);
-  GetOptional(j, "hold_still_weight", c.hold_still_weight, ctx);
-  GetOptional(j, "hold_still_alpha", c.hold_still_alpha, ctx);
-  if (j.contains("energy")) c.energy = EnergyCostConfig::FromJson(j["energy"], ctx + ".energy");
-  GetOptional(j, "yaw_offset_max_deg", c.yaw_offset_max_deg, ctx);
-  GetOptional(j, "rsi_prob", c.rsi_prob, ctx);
-  GetOptional(j, "rsi_max_fraction", c.rsi_max_fraction, ctx);
-  if (!(c.rsi_prob >= 0 && c.rsi_prob <= 1))
-    throw ConfigError(ctx + ".rsi_prob: must be in [0, 1]");
-  if (!(c.rsi_max_fraction >= 0 && c.rsi_max_fraction <= 1)) {
-    throw ConfigError(ctx + ".rsi_max_fraction: must be in [0, 1]");
-  }
-  GetOptional(j, "min_root_z", c.min_root_z, ctx);
-  GetOptional(j, "max_yaw_error_deg", c.max_yaw_error_deg, ctx);
-  GetOptional(j, "max_episode_steps", c.max_episode_steps, ctx);
-  GetOptional(j, "start_joint_noise_rad", c.start_joint_noise_rad, ctx);
-  if (!(c.start_joint_noise_rad >= 0 && c.start_joint_noise_rad <= 0.5)) {
-    throw ConfigError(ctx + ".start_joint_noise_rad: must be in [0, 0.5] rad");
-  }
-  GetOptional(j, "success_after_end_s", c.success_after_end_s, ctx);
-  GetOptional(j, "success_yaw_tol_deg", c.success_yaw_tol_deg, ctx);
-  if (j.contains("start")) c.start = BankStartConfig::FromJson(j["start"], ctx + ".start");
-  GetOptional(j, "heading_goal", c.heading_goal, ctx);
-  GetOptional(j, "heading_lookahead_s", c.heading_lookahead_s, ctx);
-  if (!(c.heading_lookahead_s >= 0 && c.heading_lookahead_s <= 2.0)) {
-    throw ConfigError(ctx + ".heading_lookahead_s: must be in [0, 2] s");
-  }
-  if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
-  if (!(c.yaw_offset_max_deg >= 0 && c.yaw_offset_max_deg <= 180)) {
-    throw ConfigError(ctx + ".yaw_offset_max_deg: must be in [0, 180]");
-  }
-  if (!(c.max_yaw_error_deg > 0 && c.max_yaw_error_deg <= 180)) {
-    throw ConfigError(ctx + ".max_yaw_error_deg: must be in (0, 180]");
-  }
-  if (!(c.success_after_end_s >= 0)) throw ConfigError(ctx + ".success_after_end_s: must be >= 0");
-  if (!(c.success_yaw_tol_deg > 0)) throw ConfigError(ctx + ".success_yaw_tol_deg: must be > 0");
-  for (double w : {c.rot_weight, c.rot_alpha, c.root_vel_weight, c.root_vel_alpha,
-                   c.hold_pose_weight, c.hold_energy_weight, c.hold_yaw_weight, c.hold_yaw_alpha,
-                   c.hold_still_weight, c.hold_still_alpha}) {
-    if (!(w >= 0)) throw ConfigError(ctx + ": reward weights and sharpness must be >= 0");
-  }
-  return c;
+namespace {
+
+FieldRule<double> Weight() {
+  return Satisfies<double>([](const double& w) { return w >= 0; }, "must be >= 0");
+}
+FieldRule<double> Between(double lo, double hi, const std::string& rule) {
+  return Satisfies<double>([lo, hi](const double& v) { return v >= lo && v <= hi; }, rule);
 }
 
-Json TurnTaskConfig::ToJson() const {
-  return Json{{"reward_variant", reward_variant},
-              {"motion_file", motion_file},
-              {"similarity", similarity.ToJson()},
-              {"rot_weight", rot_weight},
-              {"rot_alpha", rot_alpha},
-              {"root_vel_weight", root_vel_weight},
-              {"root_vel_alpha", root_vel_alpha},
-              {"hold_phase", hold_phase},
-              {"hold_pose_weight", hold_pose_weight},
-              {"hold_energy_weight", hold_energy_weight},
-              {"hold_yaw_weight", hold_yaw_weight},
-              {"hold_yaw_alpha", hold_yaw_alpha},
-              {"hold_still_weight", hold_still_weight},
-              {"hold_still_alpha", hold_still_alpha},
-              {"energy", energy.ToJson()},
-              {"yaw_offset_max_deg", yaw_offset_max_deg},
-              {"rsi_prob", rsi_prob},
-              {"rsi_max_fraction", rsi_max_fraction},
-              {"min_root_z", min_root_z},
-              {"max_yaw_error_deg", max_yaw_error_deg},
-              {"max_episode_steps", max_episode_steps},
-              {"start_joint_noise_rad", start_joint_noise_rad},
-              {"success_after_end_s", success_after_end_s},
-              {"success_yaw_tol_deg", success_yaw_tol_deg},
-              {"start", start.ToJson()},
-              {"heading_goal", heading_goal},
-              {"heading_lookahead_s", heading_lookahead_s}};
+}  // namespace
+
+const FieldTable<TurnTaskConfig>& TurnTaskConfigFields() {
+  using C = TurnTaskConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          // First: the variant sets the defaults of the fields below.
+          .With(RewardVariantField<C>)
+          .Add("motion_file", &C::motion_file, "the turn clip (default: data/motions/TASK.json)")
+          .With(SimilarityField<C>)
+          .Add("rot_weight", &C::rot_weight, "root rotation term", Weight())
+          .Add("rot_alpha", &C::rot_alpha, "its sharpness", Weight())
+          .Add("root_vel_weight", &C::root_vel_weight, "root velocity term", Weight())
+          .Add("root_vel_alpha", &C::root_vel_alpha, "its sharpness", Weight())
+          .Add("hold_phase", &C::hold_phase, "after the clip ends: the hold terms")
+          .Add("hold_pose_weight", &C::hold_pose_weight, "hold: pose term", Weight())
+          .Add("hold_energy_weight", &C::hold_energy_weight, "hold: energy term", Weight())
+          .Add("hold_yaw_weight", &C::hold_yaw_weight, "hold: heading term", Weight())
+          .Add("hold_yaw_alpha", &C::hold_yaw_alpha, "its sharpness", Weight())
+          .Add("hold_still_weight", &C::hold_still_weight, "hold: standing still", Weight())
+          .Add("hold_still_alpha", &C::hold_still_alpha, "its sharpness", Weight())
+          .With(EnergyField<C>)
+          .Add("yaw_offset_max_deg", &C::yaw_offset_max_deg, "start heading offset [deg]",
+               Between(0, 180, "must be in [0, 180]"))
+          .Add("rsi_prob", &C::rsi_prob, "share of starts along the clip",
+               Between(0, 1, "must be in [0, 1]"))
+          .Add("rsi_max_fraction", &C::rsi_max_fraction, "latest start along the clip",
+               Between(0, 1, "must be in [0, 1]"))
+          .Add("min_root_z", &C::min_root_z, "early termination below [m]")
+          .Add("max_yaw_error_deg", &C::max_yaw_error_deg, "early termination beyond [deg]",
+               Satisfies<double>([](const double& v) { return v > 0 && v <= 180; },
+                                 "must be in (0, 180]"))
+          .Add("max_episode_steps", &C::max_episode_steps, "time limit [control steps]",
+               Satisfies<int>([](const int& v) { return v >= 1; }, "must be >= 1"))
+          .Add("start_joint_noise_rad", &C::start_joint_noise_rad, "start pose noise [rad]",
+               Between(0, 0.5, "must be in [0, 0.5] rad"))
+          .Add("success_after_end_s", &C::success_after_end_s,
+               "success judged this long after the clip's end [s]", NonNegative<double>())
+          .Add("success_yaw_tol_deg", &C::success_yaw_tol_deg, "heading tolerance [deg]",
+               Positive<double>())
+          .With(StartField<C>)
+          .Add("heading_goal", &C::heading_goal, "the goal feature is the heading to reach")
+          .Add("heading_lookahead_s", &C::heading_lookahead_s, "[s]",
+               Between(0, 2.0, "must be in [0, 2] s"));
+  return t;
 }
+
+TurnTaskConfig TurnTaskConfig::FromJson(const Json& j, const std::string& ctx,
+                                        const std::string& task) {
+  TurnTaskConfig defaults;
+  defaults.motion_file = "data/motions/" + task + ".json";
+  return TurnTaskConfigFields().Read(j, ctx, defaults);
+}
+
+Json TurnTaskConfig::ToJson() const { return TurnTaskConfigFields().Write(*this); }
 
 TurnTask::TurnTask(const std::string& name, const TurnTaskConfig& config, double control_dt)
     : ClipTask(ResolveProjectPath(config.motion_file), control_dt), name_(name), c_(config) {}

@@ -8,6 +8,7 @@
 
 #include <string>
 
+#include "common/field_table.h"
 #include "common/json_util.h"
 #include "tasks/clip_task.h"
 
@@ -70,6 +71,8 @@ struct TurnTaskConfig {
   static TurnTaskConfig FromJson(const Json& j, const std::string& ctx, const std::string& task);
   Json ToJson() const;
 };
+// Every field of a turn's section, written once (common/field_table.h).
+const FieldTable<TurnTaskConfig>& TurnTaskConfigFields();
 
 struct TurnTerms {
   double pose = 0, joint_vel = 0, similarity = 0, rotation = 0, root_vel = 0, energy = 0, yaw = 0;

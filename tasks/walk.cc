@@ -6,6 +6,7 @@
 
 #include "common/paths.h"
 #include "tasks/clip_task.h"
+#include "tasks/config_fields.h"
 
 namespace perch {
 
@@ -36,117 +37,82 @@ void WalkTaskConfig::ApplyVariant(const std::string& variant, const std::string&
   reward_variant = variant;
 }
 
-WalkTaskConfig WalkTaskConfig::FromJson(const Json& j, const std::string& ctx) {
-  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(j,
-                 {"reward_variant",
-                  "motion_file",
-                  "stage",
-                  "similarity",
-                  "root_vel_weight",
-                  "root_vel_alpha",
-                  "target_weight",
-                  "target_k",
-                  "min_root_z",
-                  "max_episode_steps",
-                  "reference_state_init",
-                  "target_redraw_s",
-                  "target_reach_m",
-                  "target_min_dist_m",
-                  "target_max_dist_m",
-                  "target_max_angle_deg",
-                  "target_turn_prob",
-                  "target_turn_max_angle_deg",
-                  "fall_restart_prob",
-                  "fall_restart_lead_s",
-                  "fall_restart_pool",
-                  "start",
-                  "forward_target"},
-                 ctx);
-  WalkTaskConfig c;
-  std::string variant = c.reward_variant;
-  GetOptional(j, "reward_variant", variant, ctx);
-  c.ApplyVariant(variant, ctx);
-  GetOptional(j, "motion_file", c.motion_file, ctx);
-  std::string stage = "forward";
-  GetOptional(j, "stage", stage, ctx);
-  if (stage == "forward") {
-    c.stage = WalkStage::kForward;
-  } else if (stage == "target") {
-    c.stage = WalkStage::kTarget;
-  } else {
-    throw ConfigError(ctx + ".stage: expected \"forward\" or \"target\", got \"" + stage + "\"");
-  }
-  if (j.contains("similarity")) {
-    c.similarity =
-        SimilarityRewardConfig::FromJson(j["similarity"], ctx + ".similarity", c.similarity);
-  }
-  GetOptional(j, "root_vel_weight", c.root_vel_weight, ctx);
-  GetOptional(j, "root_vel_alpha", c.root_vel_alpha, ctx);
-  GetOptional(j, "target_weight", c.target_weight, ctx);
-  GetOptional(j, "target_k", c.target_k, ctx);
-  GetOptional(j, "min_root_z", c.min_root_z, ctx);
-  GetOptional(j, "max_episode_steps", c.max_episode_steps, ctx);
-  GetOptional(j, "reference_state_init", c.reference_state_init, ctx);
-  GetOptional(j, "target_redraw_s", c.target_redraw_s, ctx);
-  GetOptional(j, "target_reach_m", c.target_reach_m, ctx);
-  GetOptional(j, "target_min_dist_m", c.target_min_dist_m, ctx);
-  GetOptional(j, "target_max_dist_m", c.target_max_dist_m, ctx);
-  GetOptional(j, "target_max_angle_deg", c.target_max_angle_deg, ctx);
-  GetOptional(j, "target_turn_prob", c.target_turn_prob, ctx);
-  GetOptional(j, "target_turn_max_angle_deg", c.target_turn_max_angle_deg, ctx);
-  GetOptional(j, "fall_restart_prob", c.fall_restart_prob, ctx);
-  GetOptional(j, "fall_restart_lead_s", c.fall_restart_lead_s, ctx);
-  GetOptional(j, "fall_restart_pool", c.fall_restart_pool, ctx);
-  GetOptional(j, "forward_target", c.forward_target, ctx);
-  if (j.contains("start")) c.start = BankStartConfig::FromJson(j["start"], ctx + ".start");
-  if (c.start.keep_pose) throw ConfigError(ctx + ".start.keep_pose: the walk has no chair frame");
-  if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
-  if (!(c.target_redraw_s > 0)) throw ConfigError(ctx + ".target_redraw_s: must be > 0");
-  if (!(c.target_min_dist_m > 0) || c.target_max_dist_m < c.target_min_dist_m) {
-    throw ConfigError(ctx + ".target_min_dist_m/target_max_dist_m: need 0 < min <= max");
-  }
-  if (!(c.target_turn_prob >= 0 && c.target_turn_prob <= 1)) {
-    throw ConfigError(ctx + ".target_turn_prob: must be in [0, 1]");
-  }
-  if (!(c.target_turn_max_angle_deg >= 0 && c.target_turn_max_angle_deg <= 180)) {
-    throw ConfigError(ctx + ".target_turn_max_angle_deg: must be in [0, 180]");
-  }
-  if (!(c.fall_restart_prob >= 0 && c.fall_restart_prob <= 1)) {
-    throw ConfigError(ctx + ".fall_restart_prob: must be in [0, 1]");
-  }
-  if (!(c.fall_restart_lead_s > 0 && c.fall_restart_lead_s <= 10)) {
-    throw ConfigError(ctx + ".fall_restart_lead_s: must be in (0, 10] s");
-  }
-  if (c.fall_restart_pool < 1) throw ConfigError(ctx + ".fall_restart_pool: must be >= 1");
-  return c;
+namespace {
+
+FieldRule<double> UnitInterval() {
+  return Satisfies<double>([](const double& v) { return v >= 0 && v <= 1; }, "must be in [0, 1]");
 }
 
-Json WalkTaskConfig::ToJson() const {
-  return Json{{"reward_variant", reward_variant},
-              {"motion_file", motion_file},
-              {"stage", stage == WalkStage::kForward ? "forward" : "target"},
-              {"similarity", similarity.ToJson()},
-              {"root_vel_weight", root_vel_weight},
-              {"root_vel_alpha", root_vel_alpha},
-              {"target_weight", target_weight},
-              {"target_k", target_k},
-              {"min_root_z", min_root_z},
-              {"max_episode_steps", max_episode_steps},
-              {"reference_state_init", reference_state_init},
-              {"target_redraw_s", target_redraw_s},
-              {"target_reach_m", target_reach_m},
-              {"target_min_dist_m", target_min_dist_m},
-              {"target_max_dist_m", target_max_dist_m},
-              {"target_max_angle_deg", target_max_angle_deg},
-              {"target_turn_prob", target_turn_prob},
-              {"target_turn_max_angle_deg", target_turn_max_angle_deg},
-              {"fall_restart_prob", fall_restart_prob},
-              {"fall_restart_lead_s", fall_restart_lead_s},
-              {"fall_restart_pool", fall_restart_pool},
-              {"start", start.ToJson()},
-              {"forward_target", forward_target}};
+}  // namespace
+
+const FieldTable<WalkTaskConfig>& WalkTaskConfigFields() {
+  using C = WalkTaskConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          // First: the variant sets the defaults of the fields below.
+          .With(RewardVariantField<C>)
+          .Add("motion_file", &C::motion_file, "the walk clip")
+          .Custom(
+              "stage", "\"forward\" (stage 1) or \"target\" (stage 2)",
+              [](const Json& j, C& c, const std::string& ctx) {
+                std::string stage;
+                GetOptional(j, "stage", stage, ctx);
+                if (stage == "forward") {
+                  c.stage = WalkStage::kForward;
+                } else if (stage == "target") {
+                  c.stage = WalkStage::kTarget;
+                } else {
+                  throw ConfigError(ctx + ".stage: expected \"forward\" or \"target\", got \"" +
+                                    stage + "\"");
+                }
+              },
+              [](const C& c, Json& j) {
+                j["stage"] = c.stage == WalkStage::kForward ? "forward" : "target";
+              })
+          .With(SimilarityField<C>)
+          .Add("root_vel_weight", &C::root_vel_weight, "stage 1: root velocity term")
+          .Add("root_vel_alpha", &C::root_vel_alpha, "its sharpness")
+          .Add("target_weight", &C::target_weight, "stage 2: target progress (Eq. 5)")
+          .Add("target_k", &C::target_k, "Eq. 5 sigmoid slope [s/m]")
+          .Add("min_root_z", &C::min_root_z, "early termination below [m]")
+          .Add("max_episode_steps", &C::max_episode_steps, "time limit [control steps]",
+               Satisfies<int>([](const int& v) { return v >= 1; }, "must be >= 1"))
+          .Add("reference_state_init", &C::reference_state_init, "starts along the clip")
+          .Add("target_redraw_s", &C::target_redraw_s, "a new target after this [s]",
+               Positive<double>())
+          .Add("target_reach_m", &C::target_reach_m, "or when this close [m]")
+          .Add("target_min_dist_m", &C::target_min_dist_m, "targets drawn this far at least [m]")
+          .Add("target_max_dist_m", &C::target_max_dist_m, "and at most [m]")
+          .Add("target_max_angle_deg", &C::target_max_angle_deg, "within this of the heading [deg]")
+          .Add("target_turn_prob", &C::target_turn_prob, "share of targets drawn wide",
+               UnitInterval())
+          .Add("target_turn_max_angle_deg", &C::target_turn_max_angle_deg, "their angle [deg]",
+               Satisfies<double>([](const double& v) { return v >= 0 && v <= 180; },
+                                 "must be in [0, 180]"))
+          .Add("fall_restart_prob", &C::fall_restart_prob,
+               "share of episodes started shortly before a remembered fall", UnitInterval())
+          .Add("fall_restart_lead_s", &C::fall_restart_lead_s, "that long before it [s]",
+               Satisfies<double>([](const double& v) { return v > 0 && v <= 10; },
+                                 "must be in (0, 10] s"))
+          .Add("fall_restart_pool", &C::fall_restart_pool, "falls kept per env",
+               Satisfies<int>([](const int& v) { return v >= 1; }, "must be >= 1"))
+          .With(StartField<C>)
+          .Add("forward_target", &C::forward_target, "stage 1's goal features [m]")
+          .Rule([](const C& c, const std::string& ctx) {
+            if (c.start.keep_pose) return ctx + ".start.keep_pose: the walk has no chair frame";
+            if (!(c.target_min_dist_m > 0) || c.target_max_dist_m < c.target_min_dist_m) {
+              return ctx + ".target_min_dist_m/target_max_dist_m: need 0 < min <= max";
+            }
+            return std::string();
+          });
+  return t;
 }
+
+WalkTaskConfig WalkTaskConfig::FromJson(const Json& j, const std::string& ctx) {
+  return WalkTaskConfigFields().Read(j, ctx);
+}
+
+Json WalkTaskConfig::ToJson() const { return WalkTaskConfigFields().Write(*this); }
 
 std::string WalkTaskConfig::MotionPath() const { return ResolveProjectPath(motion_file); }
 

@@ -13,6 +13,7 @@
 #include <memory>
 #include <string>
 
+#include "common/field_table.h"
 #include "common/json_util.h"
 #include "envs/humanoid_env.h"
 #include "motion/reference_motion.h"
@@ -78,6 +79,8 @@ struct WalkTaskConfig {
   Json ToJson() const;
   std::string MotionPath() const;
 };
+// Every field of the "walk" section, written once (common/field_table.h).
+const FieldTable<WalkTaskConfig>& WalkTaskConfigFields();
 
 // The reward terms of the last step, for metrics and tests.
 struct WalkTerms {
