@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "common/field_table.h"
 #include "common/json_util.h"
 
 namespace perch {
@@ -26,5 +27,6 @@ struct BankStartConfig {
   static BankStartConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;
 };
+const FieldTable<BankStartConfig>& BankStartConfigFields();
 
 }  // namespace perch

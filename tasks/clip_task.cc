@@ -7,20 +7,24 @@
 
 namespace perch {
 
-EnergyCostConfig EnergyCostConfig::FromJson(const Json& j, const std::string& ctx) {
-  CheckKnownKeys(j, {"speed_weight", "action_weight"}, ctx);
-  EnergyCostConfig c;
-  GetOptional(j, "speed_weight", c.speed_weight, ctx);
-  GetOptional(j, "action_weight", c.action_weight, ctx);
-  if (!(c.speed_weight >= 0) || !(c.action_weight >= 0)) {
-    throw ConfigError(ctx + ": weights must be >= 0");
-  }
-  return c;
+const FieldTable<EnergyCostConfig>& EnergyCostConfigFields() {
+  using C = EnergyCostConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("speed_weight", &C::speed_weight, "x mean |a qdot_n| (3.5 x Roboschool's 2.0)")
+          .Add("action_weight", &C::action_weight, "x mean a^2 (3.5 x Roboschool's 0.1)")
+          .Rule([](const C& c, const std::string& ctx) {
+            return c.speed_weight >= 0 && c.action_weight >= 0 ? std::string()
+                                                               : ctx + ": weights must be >= 0";
+          });
+  return t;
 }
 
-Json EnergyCostConfig::ToJson() const {
-  return Json{{"speed_weight", speed_weight}, {"action_weight", action_weight}};
+EnergyCostConfig EnergyCostConfig::FromJson(const Json& j, const std::string& ctx) {
+  return EnergyCostConfigFields().Read(j, ctx);
 }
+
+Json EnergyCostConfig::ToJson() const { return EnergyCostConfigFields().Write(*this); }
 
 double EnergyCost(const EnergyCostConfig& c, const HumanoidChairEnv& env, const float* action) {
   const HumanoidModel& model = env.model();
@@ -37,23 +41,25 @@ double EnergyCost(const EnergyCostConfig& c, const HumanoidChairEnv& env, const 
   return -c.speed_weight * power / n - c.action_weight * a2 / n;
 }
 
-BankStartConfig BankStartConfig::FromJson(const Json& j, const std::string& ctx) {
-  CheckKnownKeys(j, {"banks", "prob", "zero_root_ang_vel", "keep_pose"}, ctx);
-  BankStartConfig c;
-  GetOptional(j, "banks", c.banks, ctx);
-  GetOptional(j, "prob", c.prob, ctx);
-  GetOptional(j, "zero_root_ang_vel", c.zero_root_ang_vel, ctx);
-  GetOptional(j, "keep_pose", c.keep_pose, ctx);
-  if (!(c.prob >= 0 && c.prob <= 1)) throw ConfigError(ctx + ".prob: must be in [0, 1]");
-  return c;
+const FieldTable<BankStartConfig>& BankStartConfigFields() {
+  using C = BankStartConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("banks", &C::banks, "bank files (their union); empty: never")
+          .Add("prob", &C::prob, "share of episodes started from a bank state",
+               Satisfies<double>([](const double& v) { return v >= 0 && v <= 1; },
+                                 "must be in [0, 1]"))
+          .Add("zero_root_ang_vel", &C::zero_root_ang_vel,
+               "zero the torso's angular velocity (as the authors' restore did)")
+          .Add("keep_pose", &C::keep_pose, "keep the state where it was relative to its chair");
+  return t;
 }
 
-Json BankStartConfig::ToJson() const {
-  return Json{{"banks", banks},
-              {"prob", prob},
-              {"zero_root_ang_vel", zero_root_ang_vel},
-              {"keep_pose", keep_pose}};
+BankStartConfig BankStartConfig::FromJson(const Json& j, const std::string& ctx) {
+  return BankStartConfigFields().Read(j, ctx);
 }
+
+Json BankStartConfig::ToJson() const { return BankStartConfigFields().Write(*this); }
 
 MotionPose ClipPlacement::Apply(const MotionPose& p) const {
   const Eigen::AngleAxisd rz(yaw, Eigen::Vector3d::UnitZ());

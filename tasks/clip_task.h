@@ -12,6 +12,7 @@
 #include <optional>
 #include <string>
 
+#include "common/field_table.h"
 #include "common/json_util.h"
 #include "envs/humanoid_env.h"
 #include "motion/reference_motion.h"
@@ -30,6 +31,7 @@ struct EnergyCostConfig {
   static EnergyCostConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;
 };
+const FieldTable<EnergyCostConfig>& EnergyCostConfigFields();
 double EnergyCost(const EnergyCostConfig& c, const HumanoidChairEnv& env, const float* action);
 
 // The reference placed in the world for one episode: p_world = R_z(yaw) p_clip + offset, plus

@@ -9,26 +9,25 @@ SimilarityRewardConfig SimilarityRewardConfig::FromJson(const Json& j, const std
   return FromJson(j, ctx, SimilarityRewardConfig());
 }
 
-SimilarityRewardConfig SimilarityRewardConfig::FromJson(const Json& j, const std::string& ctx,
-                                                        const SimilarityRewardConfig& base) {
-  SimilarityRewardConfig c = base;
-  CheckKnownKeys(j, {"w_pose", "w_vel", "alpha_pose", "alpha_vel", "finite_difference_velocities"},
-                 ctx);
-  GetOptional(j, "w_pose", c.w_pose, ctx);
-  GetOptional(j, "w_vel", c.w_vel, ctx);
-  GetOptional(j, "alpha_pose", c.alpha_pose, ctx);
-  GetOptional(j, "alpha_vel", c.alpha_vel, ctx);
-  GetOptional(j, "finite_difference_velocities", c.finite_difference_velocities, ctx);
-  return c;
+const FieldTable<SimilarityRewardConfig>& SimilarityRewardConfigFields() {
+  using C = SimilarityRewardConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("w_pose", &C::w_pose, "omega^p: pose term weight")
+          .Add("w_vel", &C::w_vel, "omega^v: joint velocity term weight")
+          .Add("alpha_pose", &C::alpha_pose, "alpha^p [1/rad^2]")
+          .Add("alpha_vel", &C::alpha_vel, "alpha^v [s^2/rad^2] (authors' code: 0.01)")
+          .Add("finite_difference_velocities", &C::finite_difference_velocities,
+               "the clip's joint velocities by finite differences (authors)");
+  return t;
 }
 
-Json SimilarityRewardConfig::ToJson() const {
-  return Json{{"w_pose", w_pose},
-              {"w_vel", w_vel},
-              {"alpha_pose", alpha_pose},
-              {"alpha_vel", alpha_vel},
-              {"finite_difference_velocities", finite_difference_velocities}};
+SimilarityRewardConfig SimilarityRewardConfig::FromJson(const Json& j, const std::string& ctx,
+                                                        const SimilarityRewardConfig& base) {
+  return SimilarityRewardConfigFields().Read(j, ctx, base);
 }
+
+Json SimilarityRewardConfig::ToJson() const { return SimilarityRewardConfigFields().Write(*this); }
 
 double AngleDiff(double a, double b) {
   double d = std::fmod(a - b + M_PI, 2.0 * M_PI);

@@ -5,6 +5,7 @@
 
 #include <string>
 
+#include "common/field_table.h"
 #include "common/json_util.h"
 
 namespace perch {
@@ -25,6 +26,7 @@ struct SimilarityRewardConfig {
                                          const SimilarityRewardConfig& base);
   Json ToJson() const;
 };
+const FieldTable<SimilarityRewardConfig>& SimilarityRewardConfigFields();
 
 // d(a, b): the angular difference wrapped into [-pi, pi) [rad].
 double AngleDiff(double a, double b);
