@@ -36,11 +36,10 @@
 
 namespace perch {
 
-void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
-  auto o = std::make_shared<EvalCommand>();
-  o->cfg.target_turn_prob = 0.0;  // eval measures the paper's targets, not a training curriculum
-  CLI::App* cmd =
-      root.add_subcommand("eval", "Evaluate a trained subtask policy over seeded episodes");
+namespace {
+
+// perch eval: which task and policy, its config overrides and the episodes.
+void AddEvalEpisodeFlags(CLI::App* cmd, EvalCommand* o) {
   cmd->add_option("--task", o->cfg.task,
                   "task to evaluate (default: the task of the model's saved config)")
       ->check(CLI::IsMember(EvalTaskNames()));
@@ -88,6 +87,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                 "sample actions instead of the Gaussian's mean");
   cmd->add_option("--no-fall-seconds", o->eval.no_fall_s, "walk: no-fall window [s]")
       ->check(CLI::PositiveNumber);
+}
+
+// perch eval: what it writes besides its figures (filmstrip, recording, JSON).
+void AddEvalOutputFlags(CLI::App* cmd, EvalCommand* o) {
   cmd->add_option("--filmstrip", o->filmstrip, "draw episode 0 as a PNG filmstrip here");
   cmd->add_option("--frames", o->frames, "filmstrip frames")->check(CLI::Range(1, 64));
   cmd->add_option("--panel-px", o->panel_px, "filmstrip panel size [px]")
@@ -105,6 +108,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       "--force", o->force,
       "overwrite an existing --record, --chain-save-sit-starts or --save-sit-starts file");
   cmd->add_flag("--json", o->json, "print one JSON object on stdout");
+}
+
+// perch eval --task sit_chair: trials, records, hand-over banks and the lookahead.
+void AddMetaEvalFlags(CLI::App* cmd, EvalCommand* o) {
   cmd->add_option("--trials", o->trials,
                   "sit_chair (the meta controller): number of trials (default: --episodes)")
       ->check(CLI::Range(1, 10000000));
@@ -170,7 +177,10 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                   "sit_chair: the walk start states (default: the evaluation bank; name the "
                   "training bank when sampling hand-overs to train on)")
       ->capture_default_str();
-  ChainFlags* chain = &o->chain;  // lives as long as o, which the callback holds
+}
+
+// perch eval --task chain: the scripted chain, its planned hand-over and its policies.
+void AddChainFlags(CLI::App* cmd, ChainFlags* chain) {
   cmd->add_option("--zone", chain->zone,
                   "chain and sit_chair: spawn zone (1 easy, 2 lateral, 3 rear)")
       ->capture_default_str()
@@ -236,8 +246,9 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                     std::string("chain: the ") + SubtaskName(id) + " policy")
         ->capture_default_str();
   }
-  cmd->callback([o]() { RunEvalCommand(*o); });
+}
 
+void RegisterSampleEndPoses(CLI::App& root) {
   struct SampleOpts {
     ConfigOverrides cfg;
     std::string model, out;
@@ -314,7 +325,9 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                 << bank.episodes_run() << " episodes\n";
     }
   });
+}
 
+void RegisterTrainLocal(CLI::App& root) {
   struct TrainOpts {
     ConfigOverrides cfg;
     LocalTrainOptions train;
@@ -354,6 +367,9 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       std::cout << "wrote " << summary["weights"] << " and " << summary["curve"] << "\n";
     }
   });
+}
+
+void RegisterMirrorModel(CLI::App& root) {
   struct MirrorOpts {
     std::string model, config, out;
     bool json = false;
@@ -388,7 +404,9 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                 << ")\n";
     }
   });
+}
 
+void RegisterAverageModels(CLI::App& root) {
   struct AverageOpts {
     std::vector<std::string> models;
     std::string out;
@@ -425,7 +443,9 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
       std::cout << "wrote " << a->out << " (mean of " << ws.size() << " models)\n";
     }
   });
+}
 
+void RegisterEvalMerge(CLI::App& root) {
   struct MergeOpts : EvalMergeOptions {
     bool json = false;
   };
@@ -460,6 +480,26 @@ void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
                 << " +- " << result["min_dist_std_m"] << " m\n";
     }
   });
+}
+
+}  // namespace
+
+void RegisterEvalCommands(CLI::App& root, CLI::App& /*bench*/) {
+  auto o = std::make_shared<EvalCommand>();
+  o->cfg.target_turn_prob = 0.0;  // eval measures the paper's targets, not a training curriculum
+  CLI::App* cmd =
+      root.add_subcommand("eval", "Evaluate a trained subtask policy over seeded episodes");
+  AddEvalEpisodeFlags(cmd, o.get());
+  AddEvalOutputFlags(cmd, o.get());
+  AddMetaEvalFlags(cmd, o.get());
+  AddChainFlags(cmd, &o->chain);  // o lives as long as the callback that holds it
+  cmd->callback([o]() { RunEvalCommand(*o); });
+
+  RegisterSampleEndPoses(root);
+  RegisterTrainLocal(root);
+  RegisterMirrorModel(root);
+  RegisterAverageModels(root);
+  RegisterEvalMerge(root);
 }
 
 }  // namespace perch
