@@ -10,6 +10,7 @@
 #include "tasks/meta_eval.h"
 #include "tasks/meta_expert.h"
 #include "tasks/meta_lookahead.h"
+#include "tests/tasks/planned_meta.h"
 
 namespace perch {
 namespace {
@@ -223,17 +224,7 @@ void ExpectMinDistSplitBySuccess(const Json& j) {
   EXPECT_GT(n, 0);
 }
 
-TaskEnvConfig PlannedMeta(int runs) {
-  Json env{{"task", "sit_chair"},
-           {"spawn", {{"zone", 1}}},
-           {"sit_chair",
-            {{"support_reward", 5.0},
-             {"meta",
-              {{"observe_active", true},
-               {"subtask_stochastic", false},
-               {"planner", {{"calibration_runs", runs}}}}}}}};
-  return TaskEnvConfig::FromJson(env, "t");
-}
+using testing_util::PlannedMeta;
 
 TEST(ChainPlan, PlanOfTheDeliveredSubtasks) {
   const TaskEnvConfig c = PlannedMeta(4);

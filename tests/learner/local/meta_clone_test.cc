@@ -7,21 +7,12 @@
 #include "tasks/hierarchy.h"
 #include "tasks/meta_env.h"
 #include "tasks/meta_expert.h"
+#include "tests/tasks/planned_meta.h"
 
 namespace perch {
 namespace {
 
-TaskEnvConfig PlannedMeta(int runs) {
-  Json env{{"task", "sit_chair"},
-           {"spawn", {{"zone", 1}}},
-           {"sit_chair",
-            {{"support_reward", 5.0},
-             {"meta",
-              {{"observe_active", true},
-               {"subtask_stochastic", false},
-               {"planner", {{"calibration_runs", runs}}}}}}}};
-  return TaskEnvConfig::FromJson(env, "t");
-}
+using testing_util::PlannedMeta;
 
 TEST(MetaClone, ClonesThePlannersChoicesAndDaggerAddsTheClonesStates) {
   const TaskEnvConfig c = PlannedMeta(2);
