@@ -47,6 +47,11 @@ template <class V>
 FieldRule<V> NonNegative() {
   return {[](const V& v) { return v >= 0; }, "must be >= 0", nullptr};
 }
+// lo <= v <= hi, stated as `rule` ("must be in [0, 1]").
+template <class V>
+FieldRule<V> InRange(V lo, V hi, std::string rule) {
+  return {[lo, hi](const V& v) { return v >= lo && v <= hi; }, std::move(rule), nullptr};
+}
 template <class V>
 FieldRule<V> Satisfies(std::function<bool(const V&)> ok, std::string rule) {
   return {std::move(ok), std::move(rule), nullptr};

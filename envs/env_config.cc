@@ -28,9 +28,6 @@ FieldRule<std::array<double, 2>> Metres() {
       [](const std::array<double, 2>& r) { return r[0] > 0 && r[0] <= r[1] && r[1] < 2.0; },
       "expected [lo, hi] with 0 < lo <= hi < 2 m");
 }
-FieldRule<double> Unit() {
-  return Satisfies<double>([](const double& v) { return v >= 0 && v <= 1; }, "must be in [0, 1]");
-}
 
 const FieldTable<ChairPlacement>& PlacementFields() {
   using C = ChairPlacement;
@@ -156,15 +153,17 @@ const FieldTable<ChairRandomConfig>& ChairRandomFields() {
   static const FieldTable<C> t =
       FieldTable<C>()
           .Add("prob", &C::prob, "share of episodes on a random chair (0: always env.chair)",
-               Unit())
+               InRange<double>(0, 1, "must be in [0, 1]"))
           .Add("seat_height", &C::seat_height, "[lo, hi] m", Metres())
           .Add("seat_width", &C::seat_width, "[lo, hi] m", Metres())
           .Add("seat_depth", &C::seat_depth, "[lo, hi] m", Metres())
           .Add("seat_thickness", &C::seat_thickness, "[lo, hi] m", Metres())
           .Add("leg_size", &C::leg_size, "[lo, hi] m", Metres())
-          .Add("backrest_prob", &C::backrest_prob, "share with a backrest", Unit())
+          .Add("backrest_prob", &C::backrest_prob, "share with a backrest",
+               InRange<double>(0, 1, "must be in [0, 1]"))
           .Add("backrest_height", &C::backrest_height, "[lo, hi] m", Metres())
-          .Add("armrest_prob", &C::armrest_prob, "share with armrests", Unit())
+          .Add("armrest_prob", &C::armrest_prob, "share with armrests",
+               InRange<double>(0, 1, "must be in [0, 1]"))
           .Add("armrest_height", &C::armrest_height, "[lo, hi] m", Metres())
           .Add("mass", &C::mass, "[kg]", Positive<double>())
           .Add("dynamic", &C::dynamic, "a body that can move (else static)")

@@ -27,17 +27,6 @@ void SitTaskConfig::ApplyVariant(const std::string& variant, const std::string& 
   reward_variant = variant;
 }
 
-namespace {
-
-FieldRule<double> Weight() {
-  return Satisfies<double>([](const double& w) { return w >= 0; }, "must be >= 0");
-}
-FieldRule<double> Between(double lo, double hi, const std::string& rule) {
-  return Satisfies<double>([lo, hi](const double& v) { return v >= lo && v <= hi; }, rule);
-}
-
-}  // namespace
-
 const FieldTable<SitTaskConfig>& SitTaskConfigFields() {
   using C = SitTaskConfig;
   static const FieldTable<C> t =
@@ -46,20 +35,24 @@ const FieldTable<SitTaskConfig>& SitTaskConfigFields() {
           .With(RewardVariantField<C>)
           .Add("motion_file", &C::motion_file, "the sit clip")
           .With(SimilarityField<C>)
-          .Add("approach_weight", &C::approach_weight, "Eq. 7 weight [per m/s]", Weight())
+          .Add("approach_weight", &C::approach_weight, "Eq. 7 weight [per m/s]",
+               NonNegative<double>())
           .Add("approach_horizontal", &C::approach_horizontal, "Eq. 7 in the horizontal plane")
           .Add("hold_phase", &C::hold_phase, "after the clip ends: the hold terms (authors)")
-          .Add("hold_pose_weight", &C::hold_pose_weight, "hold: pose term", Weight())
-          .Add("hold_energy_weight", &C::hold_energy_weight, "hold: energy term", Weight())
-          .Add("hold_contact_weight", &C::hold_contact_weight, "hold: seat contact", Weight())
+          .Add("hold_pose_weight", &C::hold_pose_weight, "hold: pose term", NonNegative<double>())
+          .Add("hold_energy_weight", &C::hold_energy_weight, "hold: energy term",
+               NonNegative<double>())
+          .Add("hold_contact_weight", &C::hold_contact_weight, "hold: seat contact",
+               NonNegative<double>())
           .Add("hold_seat_weight", &C::hold_seat_weight, "hold: pelvis at the seat target",
-               Weight())
-          .Add("hold_seat_alpha", &C::hold_seat_alpha, "[1/m^2]", Weight())
-          .Add("root_pos_weight", &C::root_pos_weight, "root follows the placed clip", Weight())
-          .Add("root_pos_alpha", &C::root_pos_alpha, "[1/m^2]", Weight())
+               NonNegative<double>())
+          .Add("hold_seat_alpha", &C::hold_seat_alpha, "[1/m^2]", NonNegative<double>())
+          .Add("root_pos_weight", &C::root_pos_weight, "root follows the placed clip",
+               NonNegative<double>())
+          .Add("root_pos_alpha", &C::root_pos_alpha, "[1/m^2]", NonNegative<double>())
           .Add("pelvis_path_weight", &C::pelvis_path_weight, "pelvis follows the placed clip (3-D)",
-               Weight())
-          .Add("pelvis_path_alpha", &C::pelvis_path_alpha, "[1/m^2]", Weight())
+               NonNegative<double>())
+          .Add("pelvis_path_alpha", &C::pelvis_path_alpha, "[1/m^2]", NonNegative<double>())
           .With(EnergyField<C>)
           .Add("pelvis_end_offset", &C::pelvis_end_offset,
                "the clip's end pelvis placed this far from the seat target [m]",
@@ -78,13 +71,13 @@ const FieldTable<SitTaskConfig>& SitTaskConfigFields() {
                "the clip's descent follows the chair's seat")
           .Add("reference_state_init", &C::reference_state_init, "starts along the clip")
           .Add("rsi_max_fraction", &C::rsi_max_fraction, "latest start along the clip",
-               Between(0, 1, "must be in [0, 1]"))
+               InRange<double>(0, 1, "must be in [0, 1]"))
           .Add("rsi_zero_joint_speeds", &C::rsi_zero_joint_speeds, "clip starts at rest")
           .Add("min_root_z", &C::min_root_z, "early termination below [m]")
           .Add("max_episode_steps", &C::max_episode_steps, "time limit [control steps]",
                Satisfies<int>([](const int& v) { return v >= 1; }, "must be >= 1"))
           .Add("start_joint_noise_rad", &C::start_joint_noise_rad, "start pose noise [rad]",
-               Between(0, 0.5, "must be in [0, 0.5] rad"))
+               InRange<double>(0, 0.5, "must be in [0, 0.5] rad"))
           .Add("success_contact_s", &C::success_contact_s, "seated this long: success [s]",
                Positive<double>())
           .Add("eval_episode_s", &C::eval_episode_s, "evaluation episode length [s]",
@@ -102,9 +95,9 @@ const FieldTable<SitTaskConfig>& SitTaskConfigFields() {
                    },
                    "expected [lo, hi] with lo <= hi, within +-2 m"))
           .Add("start_extra_across_m", &C::start_extra_across_m, "extra start offset across [m]",
-               Between(0, 2.0, "must be in [0, 2] m"))
+               InRange<double>(0, 2.0, "must be in [0, 2] m"))
           .Add("start_extra_yaw_deg", &C::start_extra_yaw_deg, "extra start heading [deg]",
-               Between(0, 180.0, "must be in [0, 180] deg"))
+               InRange<double>(0, 180.0, "must be in [0, 180] deg"))
           .Rule([](const C& c, const std::string& ctx) {
             if (!(c.start_noise_m[0] >= 0 && c.start_noise_m[1] >= 0 && c.start_noise_deg >= 0)) {
               return ctx + ".start_noise_m/start_noise_deg: must be >= 0";

@@ -31,17 +31,6 @@ void TurnTaskConfig::ApplyVariant(const std::string& variant, const std::string&
   reward_variant = variant;
 }
 
-namespace {
-
-FieldRule<double> Weight() {
-  return Satisfies<double>([](const double& w) { return w >= 0; }, "must be >= 0");
-}
-FieldRule<double> Between(double lo, double hi, const std::string& rule) {
-  return Satisfies<double>([lo, hi](const double& v) { return v >= lo && v <= hi; }, rule);
-}
-
-}  // namespace
-
 const FieldTable<TurnTaskConfig>& TurnTaskConfigFields() {
   using C = TurnTaskConfig;
   static const FieldTable<C> t =
@@ -50,24 +39,26 @@ const FieldTable<TurnTaskConfig>& TurnTaskConfigFields() {
           .With(RewardVariantField<C>)
           .Add("motion_file", &C::motion_file, "the turn clip (default: data/motions/TASK.json)")
           .With(SimilarityField<C>)
-          .Add("rot_weight", &C::rot_weight, "root rotation term", Weight())
-          .Add("rot_alpha", &C::rot_alpha, "its sharpness", Weight())
-          .Add("root_vel_weight", &C::root_vel_weight, "root velocity term", Weight())
-          .Add("root_vel_alpha", &C::root_vel_alpha, "its sharpness", Weight())
+          .Add("rot_weight", &C::rot_weight, "root rotation term", NonNegative<double>())
+          .Add("rot_alpha", &C::rot_alpha, "its sharpness", NonNegative<double>())
+          .Add("root_vel_weight", &C::root_vel_weight, "root velocity term", NonNegative<double>())
+          .Add("root_vel_alpha", &C::root_vel_alpha, "its sharpness", NonNegative<double>())
           .Add("hold_phase", &C::hold_phase, "after the clip ends: the hold terms")
-          .Add("hold_pose_weight", &C::hold_pose_weight, "hold: pose term", Weight())
-          .Add("hold_energy_weight", &C::hold_energy_weight, "hold: energy term", Weight())
-          .Add("hold_yaw_weight", &C::hold_yaw_weight, "hold: heading term", Weight())
-          .Add("hold_yaw_alpha", &C::hold_yaw_alpha, "its sharpness", Weight())
-          .Add("hold_still_weight", &C::hold_still_weight, "hold: standing still", Weight())
-          .Add("hold_still_alpha", &C::hold_still_alpha, "its sharpness", Weight())
+          .Add("hold_pose_weight", &C::hold_pose_weight, "hold: pose term", NonNegative<double>())
+          .Add("hold_energy_weight", &C::hold_energy_weight, "hold: energy term",
+               NonNegative<double>())
+          .Add("hold_yaw_weight", &C::hold_yaw_weight, "hold: heading term", NonNegative<double>())
+          .Add("hold_yaw_alpha", &C::hold_yaw_alpha, "its sharpness", NonNegative<double>())
+          .Add("hold_still_weight", &C::hold_still_weight, "hold: standing still",
+               NonNegative<double>())
+          .Add("hold_still_alpha", &C::hold_still_alpha, "its sharpness", NonNegative<double>())
           .With(EnergyField<C>)
           .Add("yaw_offset_max_deg", &C::yaw_offset_max_deg, "start heading offset [deg]",
-               Between(0, 180, "must be in [0, 180]"))
+               InRange<double>(0, 180, "must be in [0, 180]"))
           .Add("rsi_prob", &C::rsi_prob, "share of starts along the clip",
-               Between(0, 1, "must be in [0, 1]"))
+               InRange<double>(0, 1, "must be in [0, 1]"))
           .Add("rsi_max_fraction", &C::rsi_max_fraction, "latest start along the clip",
-               Between(0, 1, "must be in [0, 1]"))
+               InRange<double>(0, 1, "must be in [0, 1]"))
           .Add("min_root_z", &C::min_root_z, "early termination below [m]")
           .Add("max_yaw_error_deg", &C::max_yaw_error_deg, "early termination beyond [deg]",
                Satisfies<double>([](const double& v) { return v > 0 && v <= 180; },
@@ -75,7 +66,7 @@ const FieldTable<TurnTaskConfig>& TurnTaskConfigFields() {
           .Add("max_episode_steps", &C::max_episode_steps, "time limit [control steps]",
                Satisfies<int>([](const int& v) { return v >= 1; }, "must be >= 1"))
           .Add("start_joint_noise_rad", &C::start_joint_noise_rad, "start pose noise [rad]",
-               Between(0, 0.5, "must be in [0, 0.5] rad"))
+               InRange<double>(0, 0.5, "must be in [0, 0.5] rad"))
           .Add("success_after_end_s", &C::success_after_end_s,
                "success judged this long after the clip's end [s]", NonNegative<double>())
           .Add("success_yaw_tol_deg", &C::success_yaw_tol_deg, "heading tolerance [deg]",
@@ -83,7 +74,7 @@ const FieldTable<TurnTaskConfig>& TurnTaskConfigFields() {
           .With(StartField<C>)
           .Add("heading_goal", &C::heading_goal, "the goal feature is the heading to reach")
           .Add("heading_lookahead_s", &C::heading_lookahead_s, "[s]",
-               Between(0, 2.0, "must be in [0, 2] s"));
+               InRange<double>(0, 2.0, "must be in [0, 2] s"));
   return t;
 }
 

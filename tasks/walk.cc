@@ -37,14 +37,6 @@ void WalkTaskConfig::ApplyVariant(const std::string& variant, const std::string&
   reward_variant = variant;
 }
 
-namespace {
-
-FieldRule<double> UnitInterval() {
-  return Satisfies<double>([](const double& v) { return v >= 0 && v <= 1; }, "must be in [0, 1]");
-}
-
-}  // namespace
-
 const FieldTable<WalkTaskConfig>& WalkTaskConfigFields() {
   using C = WalkTaskConfig;
   static const FieldTable<C> t =
@@ -85,12 +77,13 @@ const FieldTable<WalkTaskConfig>& WalkTaskConfigFields() {
           .Add("target_max_dist_m", &C::target_max_dist_m, "and at most [m]")
           .Add("target_max_angle_deg", &C::target_max_angle_deg, "within this of the heading [deg]")
           .Add("target_turn_prob", &C::target_turn_prob, "share of targets drawn wide",
-               UnitInterval())
+               InRange<double>(0, 1, "must be in [0, 1]"))
           .Add("target_turn_max_angle_deg", &C::target_turn_max_angle_deg, "their angle [deg]",
                Satisfies<double>([](const double& v) { return v >= 0 && v <= 180; },
                                  "must be in [0, 180]"))
           .Add("fall_restart_prob", &C::fall_restart_prob,
-               "share of episodes started shortly before a remembered fall", UnitInterval())
+               "share of episodes started shortly before a remembered fall",
+               InRange<double>(0, 1, "must be in [0, 1]"))
           .Add("fall_restart_lead_s", &C::fall_restart_lead_s, "that long before it [s]",
                Satisfies<double>([](const double& v) { return v > 0 && v <= 10; },
                                  "must be in (0, 10] s"))
