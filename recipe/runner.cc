@@ -623,6 +623,7 @@ void Runner::Progress() {
 }
 
 void Runner::MoveAside(const std::vector<std::string>& names) {
+  if (names.empty()) return;  // no empty superseded/<time>/ folders
   std::error_code ec;
   const std::string old = dir_ + "/superseded/" + UtcStamp();
   fs::create_directories(old, ec);
