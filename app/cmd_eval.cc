@@ -17,14 +17,14 @@
 #include "common/paths.h"
 #include "envs/chair.h"
 #include "eval/eval_command.h"
+#include "hierarchy/hierarchy.h"
+#include "hierarchy/meta_env.h"
+#include "hierarchy/meta_eval.h"
+#include "hierarchy/meta_expert.h"
 #include "learner/local/local_train.h"
 #include "learner/model_average.h"
 #include "learner/service/checkpoint.h"
 #include "policy/policy.h"
-#include "tasks/hierarchy.h"
-#include "tasks/meta_env.h"
-#include "tasks/meta_eval.h"
-#include "tasks/meta_expert.h"
 #include "tasks/model_source.h"
 #include "tasks/registry.h"
 #include "tasks/state_bank.h"
@@ -117,7 +117,7 @@ void AddMetaEvalFlags(CLI::App* cmd, EvalCommand* o) {
       ->check(CLI::Range(1, 10000000));
   cmd->add_flag("--planner", o->planner,
                 "sit_chair: the scripted planner of the config's sit_chair.meta.planner decides "
-                "instead of a meta policy (tasks/meta_expert.h); needs --config, no --model");
+                "instead of a meta policy (hierarchy/meta_expert.h); needs --config, no --model");
   cmd->add_option("--matrix-png", o->matrix_png,
                   "sit_chair: draw the subtask transition matrices (per start side) here");
   cmd->add_option("--records", o->records,
@@ -144,11 +144,11 @@ void AddMetaEvalFlags(CLI::App* cmd, EvalCommand* o) {
   cmd->add_option("--lookahead-delays-s", o->lookahead_delays_s,
                   "sit_chair with a meta policy: at each of its switches also simulate the switch "
                   "delayed by each of these times to the episode's end and take the best "
-                  "(tasks/meta_lookahead.h; the planner's lookahead is in its config) [s]")
+                  "(hierarchy/meta_lookahead.h; the planner's lookahead is in its config) [s]")
       ->check(CLI::Range(0.001, 3.0));
   cmd->add_flag("--lookahead-sides", o->lookahead_sides,
                 "sit_chair with a meta policy: at each of its switches into a turn also simulate "
-                "the other turn (tasks/meta_lookahead.h)");
+                "the other turn (hierarchy/meta_lookahead.h)");
   cmd->add_option("--lookahead-straight-s", o->lookahead_straight_s,
                   "sit_chair with a meta policy: at its first step also simulate the walker "
                   "walking straight on for each of these times before the policy steers [s]")
@@ -207,7 +207,7 @@ void AddChainFlags(CLI::App* cmd, ChainFlags* chain) {
                 "chain: end each episode at the switch to sit (sampling sit starts only)");
   cmd->add_flag("--chain-plan", chain->options.plan,
                 "chain: the planned hand-over (walk so that the turn ends where the sit's clip "
-                "starts; tasks/chain_plan.h)");
+                "starts; hierarchy/chain_plan.h)");
   cmd->add_option("--chain-plan-reach-m", chain->options.planner.reach_m,
                   "chain plan: hand over when the predicted turn end is this close [m]")
       ->check(CLI::Range(0.0, 2.0));

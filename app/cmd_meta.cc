@@ -10,11 +10,11 @@
 #include "common/json_util.h"
 #include "common/paths.h"
 #include "experiment/experiment.h"
+#include "hierarchy/hierarchy.h"
+#include "hierarchy/meta_expert.h"
 #include "learner/local/meta_clone.h"
 #include "learner/service/checkpoint.h"
 #include "protocol/wire.h"
-#include "tasks/hierarchy.h"
-#include "tasks/meta_expert.h"
 #include "tasks/model_source.h"
 #include "tasks/task_env.h"
 

@@ -9,9 +9,12 @@
 #include "app/commands.h"
 #include "common/json_util.h"
 #include "common/paths.h"
+#include "hierarchy/hierarchy.h"
 #include "protocol/wire.h"
 
 int main(int argc, char** argv) {
+  // The program's tasks: the subtasks (tasks/registry.cc) and the hierarchy's sit_chair.
+  perch::RegisterHierarchyTasks();
   CLI::App app{"Perch: distributed RL that teaches a simulated humanoid to sit on a chair"};
   // Every option's help shows its default (set before any option is added; subcommands inherit).
   app.option_defaults()->always_capture_default();

@@ -11,9 +11,9 @@
 
 #include "common/paths.h"
 #include "envs/chair.h"
-#include "tasks/meta_env.h"
-#include "tasks/meta_eval.h"
-#include "tasks/meta_expert.h"
+#include "hierarchy/meta_env.h"
+#include "hierarchy/meta_eval.h"
+#include "hierarchy/meta_expert.h"
 #include "tasks/model_source.h"
 #include "tasks/recording.h"
 #include "tasks/registry.h"
@@ -56,7 +56,7 @@ PlannerConfig ResolveLookahead(const EvalCommand& o) {
 }
 
 // The records file: made with its header, or resumed (the same header: the same trials);
-// appended to as trials finish (tasks/meta_eval.h). Returns the trials resumed.
+// appended to as trials finish (hierarchy/meta_eval.h). Returns the trials resumed.
 int OpenRecords(const EvalCommand& o, const TaskEnvConfig& mc,
                 const proto::ModelWeights& meta_weights,
                 const std::vector<FrozenPolicyData>& frozen, const std::string& model_file,

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "eval/eval_config.h"
-#include "tasks/hierarchy.h"
+#include "hierarchy/hierarchy.h"
 
 namespace perch {
 

@@ -140,7 +140,7 @@ TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_p
 
 std::vector<std::string> EvalTaskNames() {
   std::vector<std::string> names = TaskNames();
-  names.push_back("chain");  // the scripted walk -> turn -> sit chain (tasks/hierarchy.h)
+  names.push_back("chain");  // the scripted walk -> turn -> sit chain (hierarchy/hierarchy.h)
   return names;
 }
 

@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "tasks/chain_plan.h"
+#include "hierarchy/chain_plan.h"
 #include "tasks/task_env.h"
 #include "tasks/task_eval.h"
 

@@ -4,7 +4,7 @@
 #include <array>
 
 #include "common/config_file.h"
-#include "tasks/meta_env.h"
+#include "hierarchy/meta_env.h"
 #include "tasks/task_env.h"
 
 namespace perch {
@@ -41,7 +41,7 @@ ExperimentConfig ExperimentConfigFromJson(const Json& j, const std::string& ctx)
                         "cluster.task \"meta\" on env.task \"sit_chair\" (the meta env)");
     }
     if (c.cluster.task == "meta") {
-      // The meta controller trains over the sit_chair env (tasks/meta_env.h).
+      // The meta controller trains over the sit_chair env (hierarchy/meta_env.h).
       if (env_task != "sit_chair") {
         throw ConfigError(ctx + ".cluster.task: \"meta\" needs env.task \"sit_chair\", got \"" +
                           env_task + "\"");

@@ -4,7 +4,6 @@
 
 #include "common/paths.h"
 #include "envs/chair.h"
-#include "tasks/hierarchy.h"
 #include "tasks/sit.h"
 #include "tasks/state_bank.h"
 #include "tasks/task_env.h"
@@ -13,10 +12,9 @@
 #include "tasks/walk_eval.h"
 
 namespace perch {
-namespace {
 
 // Every start bank of a task config reads and fits the humanoid (ConfigError naming the field).
-void CheckBanks(const BankStartConfig& start, const TaskEnvConfig& c, const std::string& ctx) {
+void CheckStartBanks(const BankStartConfig& start, const TaskEnvConfig& c, const std::string& ctx) {
   if (start.banks.empty()) return;
   const HumanoidModel model = HumanoidModel::Load(c.env.HumanoidPath());
   for (const std::string& b : start.banks) {
@@ -40,6 +38,8 @@ void CheckBanks(const BankStartConfig& start, const TaskEnvConfig& c, const std:
   }
 }
 
+namespace {
+
 TaskDef WalkDef() {
   TaskDef d;
   d.name = "walk";
@@ -50,7 +50,7 @@ TaskDef WalkDef() {
   };
   d.write = [](const TaskEnvConfig& c) { return c.walk.ToJson(); };
   d.check = [](const TaskEnvConfig& c, const std::string& ctx) {
-    CheckBanks(c.walk.start, c, ctx + ".walk");
+    CheckStartBanks(c.walk.start, c, ctx + ".walk");
   };
   d.make = [](const TaskEnvConfig& c) -> std::unique_ptr<Task> {
     return std::make_unique<WalkTask>(c.walk, c.control_dt());
@@ -94,7 +94,7 @@ TaskDef TurnDef(const std::string& name) {
   };
   d.write = [](const TaskEnvConfig& c) { return c.Section<TurnTaskConfig>().ToJson(); };
   d.check = [name](const TaskEnvConfig& c, const std::string& ctx) {
-    CheckBanks(c.Section<TurnTaskConfig>().start, c, ctx + "." + name);
+    CheckStartBanks(c.Section<TurnTaskConfig>().start, c, ctx + "." + name);
   };
   d.make = [name](const TaskEnvConfig& c) -> std::unique_ptr<Task> {
     return std::make_unique<TurnTask>(name, c.Section<TurnTaskConfig>(), c.control_dt());
@@ -121,7 +121,7 @@ TaskDef SitDef() {
   };
   d.write = [](const TaskEnvConfig& c) { return c.Section<SitTaskConfig>().ToJson(); };
   d.check = [](const TaskEnvConfig& c, const std::string& ctx) {
-    CheckBanks(c.Section<SitTaskConfig>().start, c, ctx + ".sit");
+    CheckStartBanks(c.Section<SitTaskConfig>().start, c, ctx + ".sit");
     const Chair chair = Chair::Load(c.env.ChairPath());
     const double limit = c.Section<SitTaskConfig>().max_seat_height_m;
     if (chair.seat_height() > limit) {
@@ -144,32 +144,10 @@ TaskDef SitDef() {
   return d;
 }
 
-TaskDef SitChairDef() {
-  TaskDef d;
-  d.name = "sit_chair";
-  d.description =
-      "sit_chair: the main task, sit down from a spawn zone around the chair (the meta "
-      "controller's env; no single-policy evaluation: perch eval --task chain)";
-  d.obs_layout = ObsLayout::kProprioChair;
-  d.needs_chair = true;
-  d.read = [](const Json* j, const std::string& ctx, TaskEnvConfig* c) {
-    c->section = std::make_shared<TaskSectionOf<SitChairTaskConfig>>(
-        SitChairTaskConfig::FromJson(j != nullptr ? *j : Json::object(), ctx));
-  };
-  d.write = [](const TaskEnvConfig& c) { return c.Section<SitChairTaskConfig>().ToJson(); };
-  d.check = [](const TaskEnvConfig& c, const std::string& ctx) {
-    CheckBanks(c.Section<SitChairTaskConfig>().start, c, ctx + ".sit_chair");
-  };
-  d.make = [](const TaskEnvConfig& c) -> std::unique_ptr<Task> {
-    return std::make_unique<SitChairTask>(c.Section<SitChairTaskConfig>(), c.control_dt());
-  };
-  return d;
-}
-
 // A deque: registering a task never moves the others (FindTask hands out pointers).
 std::deque<TaskDef>& Registry() {
   static std::deque<TaskDef> tasks = {WalkDef(), TurnDef("turn_left"), TurnDef("turn_right"),
-                                      SitDef(), SitChairDef()};
+                                      SitDef()};
   return tasks;
 }
 

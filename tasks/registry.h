@@ -2,7 +2,8 @@
 // EnvPool binds task ids to specs). Per task: its observation layout, whether it needs a chair,
 // how its config section is read and written, its factory and its evaluation. The env factory,
 // `perch train`, `perch eval` and `--check-config` find tasks here; adding a task is its own
-// file plus one entry in registry.cc (or a TaskRegistration in its own file).
+// file plus one entry in registry.cc (or a TaskRegistration in its own file). The hierarchy's
+// sit_chair task lives a floor above (hierarchy/) and is added by RegisterHierarchyTasks().
 #pragma once
 
 #include <functional>
@@ -19,6 +20,7 @@
 namespace perch {
 
 struct TaskEnvConfig;
+struct BankStartConfig;
 struct EvalOptions;
 struct EvalRecording;
 
@@ -71,5 +73,10 @@ const TaskDef* FindTask(const std::string& name);
 const TaskDef& GetTask(const std::string& name, const std::string& ctx);
 std::vector<std::string> TaskNames();
 std::string TaskNamesJoined();  // "stand, walk, turn_left, ..."
+
+// A task's `start` banks each read and fit the humanoid; with keep_pose each state carries its
+// chair (ConfigError naming CTX.start.banks / CTX.start.keep_pose). For TaskDef::check.
+void CheckStartBanks(const BankStartConfig& start, const TaskEnvConfig& config,
+                     const std::string& ctx);
 
 }  // namespace perch

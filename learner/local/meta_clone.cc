@@ -8,11 +8,11 @@
 #include <thread>
 
 #include "common/rng.h"
+#include "hierarchy/hierarchy.h"
+#include "hierarchy/meta_env.h"
+#include "hierarchy/meta_lookahead.h"
 #include "learner/adam.h"
 #include "policy/normalizer.h"
-#include "tasks/hierarchy.h"
-#include "tasks/meta_env.h"
-#include "tasks/meta_lookahead.h"
 #include "tasks/task_eval.h"
 
 namespace perch {
@@ -28,7 +28,7 @@ struct Episode {
 };
 
 // The teacher: the planner's rules, or the rules with lookahead when the plan's config asks for
-// it (tasks/meta_lookahead.h; it may restore the env to the state it saved).
+// it (hierarchy/meta_lookahead.h; it may restore the env to the state it saved).
 struct Teacher {
   std::unique_ptr<MetaPlanner> rules;
   std::unique_ptr<LookaheadPlanner> ahead;

@@ -1,5 +1,5 @@
 // Behaviour cloning of the scripted planner into a meta policy (ours; issue 15): `perch
-// meta-clone`. The planner (tasks/meta_expert.h) drives MetaEnv for some episodes; every meta
+// meta-clone`. The planner (hierarchy/meta_expert.h) drives MetaEnv for some episodes; every meta
 // step's observation and the planner's hybrid action [class, theta, dist] are kept; the meta
 // network (the config's, as PPO trains it) is fitted by maximising the log-likelihood of those
 // actions (cross-entropy on the switch, Gaussian on the target) with Adam, and the observation
@@ -21,8 +21,8 @@
 #include "common/env.h"
 #include "common/json_util.h"
 #include "common/proto/model.pb.h"
+#include "hierarchy/meta_expert.h"
 #include "policy/policy.h"
-#include "tasks/meta_expert.h"
 #include "tasks/task_env.h"
 
 namespace perch {

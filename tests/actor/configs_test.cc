@@ -13,8 +13,8 @@
 #include "common/json_util.h"
 #include "common/paths.h"
 #include "experiment/experiment.h"
+#include "hierarchy/chain_plan.h"
 #include "learner/service/learner_setup.h"
-#include "tasks/chain_plan.h"
 #include "tasks/task_env.h"
 
 namespace perch {

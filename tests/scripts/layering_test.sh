@@ -19,10 +19,12 @@ may_include = {
     'motion': ['common', 'envs'],
     'viz': ['common', 'envs', 'motion'],
     'tasks': ['common', 'envs', 'motion', 'policy'],
-    'eval': ['common', 'envs', 'motion', 'policy', 'tasks', 'viz'],
-    'experiment': ['common', 'envs', 'motion', 'policy', 'protocol', 'tasks'],
+    'hierarchy': ['common', 'envs', 'motion', 'policy', 'tasks'],
+    'eval': ['common', 'envs', 'motion', 'policy', 'tasks', 'hierarchy', 'viz'],
+    'experiment': ['common', 'envs', 'motion', 'policy', 'protocol', 'tasks', 'hierarchy'],
     'learner': ['common', 'policy', 'protocol'],
-    'learner/local': ['common', 'envs', 'motion', 'policy', 'protocol', 'tasks', 'learner'],
+    'learner/local': ['common', 'envs', 'motion', 'policy', 'protocol', 'tasks', 'hierarchy',
+                      'learner'],
     'learner/service': ['common', 'policy', 'protocol', 'experiment', 'learner'],
     'actor': ['common', 'envs', 'motion', 'policy', 'protocol', 'tasks', 'experiment'],
     'launch': ['common', 'envs', 'motion', 'policy', 'protocol', 'tasks', 'experiment', 'learner',
@@ -39,7 +41,9 @@ must_not_link = {
     'perch_policy': ['perch_envs', 'perch_protocol', 'perch_tasks'] + training,
     'perch_protocol': ['perch_envs', 'perch_tasks', 'perch_experiment'] + training,
     'perch_viz': ['perch_tasks', 'perch_policy'] + training,
-    'perch_tasks': ['perch_viz', 'perch_protocol', 'perch_experiment', 'perch_actor'] + training,
+    'perch_tasks': ['perch_hierarchy', 'perch_viz', 'perch_protocol', 'perch_experiment',
+                    'perch_actor'] + training,
+    'perch_hierarchy': ['perch_viz', 'perch_protocol', 'perch_experiment', 'perch_actor'] + training,
     'perch_eval': ['perch_protocol', 'perch_experiment', 'perch_actor'] + training,
     'perch_experiment': ['perch_viz', 'perch_actor'] + training,
     'perch_learner': ['perch_envs', 'perch_tasks', 'perch_experiment', 'perch_actor',
@@ -105,14 +109,14 @@ def check(src, graph_path):
 tmp = tempfile.mkdtemp()
 os.makedirs(os.path.join(tmp, 'tasks'))
 with open(os.path.join(tmp, 'tasks', 'x.cc'), 'w') as f:
-    f.write('#include "learner/ppo.h"\n#include "policy/policy.h"\n')
+    f.write('#include "learner/ppo.h"\n#include "policy/policy.h"\n#include "hierarchy/meta_env.h"\n')
 with open(os.path.join(tmp, 'graph.txt'), 'w') as f:
     for lib in must_not_link:
         f.write('%s: perch_common\n' % lib)
     f.write('perch_tasks: perch_policy;perch_motion\nperch_motion: perch_learner_local\n')
 seen, _ = check(tmp, os.path.join(tmp, 'graph.txt'))
 shutil.rmtree(tmp)
-want = ['tasks/x.cc includes "learner/...', 'perch_tasks links perch_learner_local (perch_tasks -> perch_motion']
+want = ['tasks/x.cc includes "learner/...', 'tasks/x.cc includes "hierarchy/...', 'perch_tasks links perch_learner_local (perch_tasks -> perch_motion']
 for w in want:
     if not any(b.startswith(w) for b in seen):
         print('layering: the check missed a planted break: %s (saw %s)' % (w, seen))

@@ -4,10 +4,10 @@
 
 #include <memory>
 
-#include "tasks/hierarchy.h"
-#include "tasks/meta_env.h"
-#include "tasks/meta_expert.h"
-#include "tests/tasks/planned_meta.h"
+#include "hierarchy/hierarchy.h"
+#include "hierarchy/meta_env.h"
+#include "hierarchy/meta_expert.h"
+#include "tests/hierarchy/planned_meta.h"
 
 namespace perch {
 namespace {

@@ -1,4 +1,4 @@
-#include "tasks/meta_env.h"
+#include "hierarchy/meta_env.h"
 
 #include <gtest/gtest.h>
 
@@ -11,8 +11,8 @@
 #include <set>
 
 #include "common/paths.h"
+#include "hierarchy/meta_eval.h"
 #include "learner/ppo.h"
-#include "tasks/meta_eval.h"
 #include "tasks/model_source.h"
 #include "tasks/recording.h"
 
@@ -805,7 +805,7 @@ TEST(MetaEval, StartRoutesAreRecordedAndTheTrialTakesTheBest) {
 }
 
 // A saved episode restored into a second env goes on exactly as the env that saved it does after
-// restoring it too (the lookahead planner's simulator, tasks/meta_lookahead.h): the same
+// restoring it too (the lookahead planner's simulator, hierarchy/meta_lookahead.h): the same
 // observations, rewards, subtask sequence and record, through hand-overs to a turn and the sit.
 TEST(MetaEnv, ARestoredEpisodeGoesOnAsTheSavingEnvDoes) {
   TaskEnvConfig c = MetaConfigFor({"turn_left", "turn_right", "sit", "walk"}, 1, 4.0);

@@ -1,16 +1,16 @@
-#include "tasks/chain_plan.h"
+#include "hierarchy/chain_plan.h"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
 
-#include "tasks/hierarchy.h"
-#include "tasks/meta_env.h"
-#include "tasks/meta_eval.h"
-#include "tasks/meta_expert.h"
-#include "tasks/meta_lookahead.h"
-#include "tests/tasks/planned_meta.h"
+#include "hierarchy/hierarchy.h"
+#include "hierarchy/meta_env.h"
+#include "hierarchy/meta_eval.h"
+#include "hierarchy/meta_expert.h"
+#include "hierarchy/meta_lookahead.h"
+#include "tests/hierarchy/planned_meta.h"
 
 namespace perch {
 namespace {
@@ -309,7 +309,7 @@ TEST(ChainPlan, PlanOfTheDeliveredSubtasks) {
   for (const Json& s : walked["sequences"]) EXPECT_EQ(s["sequence"], "walk");
 }
 
-// The planner with lookahead (tasks/meta_lookahead.h): its simulator is exact (every trial ends
+// The planner with lookahead (hierarchy/meta_lookahead.h): its simulator is exact (every trial ends
 // as its last look ahead predicted), it looks ahead at the first decision (both turns) and at the
 // hand-overs, and no trial ends worse than the rules alone would have from its first decision
 // (with the same restores: without them the rules' trials differ chaotically).

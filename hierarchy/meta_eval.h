@@ -16,7 +16,7 @@
 #include "common/proto/bank.pb.h"
 #include "common/proto/model.pb.h"
 #include "envs/pose_frame.h"
-#include "tasks/chain_plan.h"
+#include "hierarchy/chain_plan.h"
 #include "tasks/task_env.h"
 
 namespace perch {
@@ -38,7 +38,7 @@ struct MetaTrialRecord {
   double spawn_theta = 0.0;        // [rad]
   std::vector<int> sequence;       // SubtaskId of each run
   std::vector<float> begin_value;  // [run] the subtask's critic when it began
-  // With a lookahead (tasks/meta_lookahead.h): its work and what it predicted.
+  // With a lookahead (hierarchy/meta_lookahead.h): its work and what it predicted.
   bool has_lookahead = false;
   int la_points = 0, la_rollouts = 0, la_changed = 0;
   bool la_predicted_any = false;
@@ -78,7 +78,7 @@ struct MetaEvalOptions {
   bool stochastic = false;
   int threads = 1;
   std::function<void(int done, int successes)> progress;  // called from the threads, serialised
-  // When set, the scripted planner (tasks/meta_expert.h) decides instead of the meta policy.
+  // When set, the scripted planner (hierarchy/meta_expert.h) decides instead of the meta policy.
   std::shared_ptr<const MetaPlan> planner;
   // When set: the state at every hand-over to starts_subtask (the sit unless changed), in trial
   // order (`episode` = the trial), for training that subtask on them (`perch eval
@@ -88,8 +88,8 @@ struct MetaEvalOptions {
   // Whose hand-overs those are (a SubtaskId; `perch eval --hand-overs-to`): the sit by default,
   // a turn to train the turn on the states the meta hands it, the walk for its hand-backs (the
   // episode's first run, from the spawn, is never a hand-over).
-  int starts_subtask = 2;  // kSit (tasks/hierarchy.h)
-  // A meta policy with lookahead (tasks/meta_lookahead.h; `perch eval --lookahead-*`): only the
+  int starts_subtask = 2;  // kSit (hierarchy/hierarchy.h)
+  // A meta policy with lookahead (hierarchy/meta_lookahead.h; `perch eval --lookahead-*`): only the
   // lookahead_* fields count (delays at each of its switches, the other turn at each switch into
   // a turn, straight-on walking at the start, the rank). None set: the policy alone. (The
   // planner's lookahead is its config's.)

@@ -1,13 +1,15 @@
-#include "tasks/hierarchy.h"
+#include "hierarchy/hierarchy.h"
 
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <mutex>
 
 #include "common/paths.h"
 #include "envs/spawn.h"
-#include "tasks/chain_plan.h"
+#include "hierarchy/chain_plan.h"
 #include "tasks/imitation.h"
+#include "tasks/registry.h"
 #include "tasks/state_bank.h"
 #include "tasks/task_env.h"
 #include "tasks/task_eval.h"
@@ -304,7 +306,7 @@ Json EvaluateChain(const TaskEnvConfig& config,
   const Eigen::Vector2d facing(std::cos(chair_yaw), std::sin(chair_yaw));
   std::vector<float> obs(env->spec().obs_dim), action(21);
   if (o.decision_period < 1) throw ConfigError("chain: decision period must be >= 1");
-  // The planned hand-over: where the sit starts, how each turn moves (tasks/chain_plan.h).
+  // The planned hand-over: where the sit starts, how each turn moves (hierarchy/chain_plan.h).
   MetaPlan plan;
   PlanRule rule;
   if (o.plan) {
@@ -492,6 +494,37 @@ Json EvaluateChain(const TaskEnvConfig& config,
                 {"sit_yaw_deg", o.sit_yaw_deg},
                 {"turn_min_s", o.turn_min_s},
                 {"side", o.side}}}};
+}
+
+namespace {
+
+TaskDef SitChairDef() {
+  TaskDef d;
+  d.name = "sit_chair";
+  d.description =
+      "sit_chair: the main task, sit down from a spawn zone around the chair (the meta "
+      "controller's env; no single-policy evaluation: perch eval --task chain)";
+  d.obs_layout = ObsLayout::kProprioChair;
+  d.needs_chair = true;
+  d.read = [](const Json* j, const std::string& ctx, TaskEnvConfig* c) {
+    c->section = std::make_shared<TaskSectionOf<SitChairTaskConfig>>(
+        SitChairTaskConfig::FromJson(j != nullptr ? *j : Json::object(), ctx));
+  };
+  d.write = [](const TaskEnvConfig& c) { return c.Section<SitChairTaskConfig>().ToJson(); };
+  d.check = [](const TaskEnvConfig& c, const std::string& ctx) {
+    CheckStartBanks(c.Section<SitChairTaskConfig>().start, c, ctx + ".sit_chair");
+  };
+  d.make = [](const TaskEnvConfig& c) -> std::unique_ptr<Task> {
+    return std::make_unique<SitChairTask>(c.Section<SitChairTaskConfig>(), c.control_dt());
+  };
+  return d;
+}
+
+}  // namespace
+
+void RegisterHierarchyTasks() {
+  static std::once_flag once;
+  std::call_once(once, [] { RegisterTask(SitChairDef()); });
 }
 
 }  // namespace perch

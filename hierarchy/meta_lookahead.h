@@ -16,8 +16,8 @@
 #include <optional>
 #include <vector>
 
-#include "tasks/meta_env.h"
-#include "tasks/meta_expert.h"
+#include "hierarchy/meta_env.h"
+#include "hierarchy/meta_expert.h"
 
 namespace perch {
 

@@ -1,4 +1,4 @@
-#include "tasks/meta_eval.h"
+#include "hierarchy/meta_eval.h"
 
 #include <fcntl.h>
 #include <sys/file.h>
@@ -17,10 +17,10 @@
 #include <thread>
 
 #include "common/file_util.h"
+#include "hierarchy/meta_env.h"
+#include "hierarchy/meta_expert.h"
+#include "hierarchy/meta_lookahead.h"
 #include "policy/policy.h"
-#include "tasks/meta_env.h"
-#include "tasks/meta_expert.h"
-#include "tasks/meta_lookahead.h"
 #include "tasks/recording.h"
 #include "tasks/state_bank.h"
 #include "tasks/task_eval.h"

@@ -1,4 +1,4 @@
-#include "tasks/chain_plan.h"
+#include "hierarchy/chain_plan.h"
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -6,7 +6,7 @@
 #include <utility>
 
 #include "common/rng.h"
-#include "tasks/hierarchy.h"
+#include "hierarchy/hierarchy.h"
 #include "tasks/imitation.h"
 #include "tasks/sit.h"
 #include "tasks/task_env.h"
@@ -170,34 +170,34 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
 
 Json PlannerConfig::ToJson() const {
   Json j{{"pass_m", pass_m},
-              {"reach_m", reach_m},
-              {"lookahead_m", lookahead_m},
-              {"aim_m", aim_m},
-              {"sit_yaw_deg", sit_yaw_deg},
-              {"turn_max_s", turn_max_s},
-              {"turn_min_s", turn_min_s},
-              {"calibration_runs", calibration_runs},
-              {"calibration_seed", calibration_seed},
-              {"side", side},
-              {"approach_deg", approach_deg},
-              {"regress_start_state", regress_start_state},
-              {"clearance_m", clearance_m},
-              {"avoid_front_m", avoid_front_m},
-              {"turn_value_min", turn_value_min},
-              {"sit_value_min", sit_value_min},
-              {"value_wait_s", value_wait_s},
-              {"sit_value_early", sit_value_early},
-              {"sit_value_yaw_deg", sit_value_yaw_deg},
-              {"turn_abort_value", turn_abort_value},
-              {"sit_retry_value", sit_retry_value},
-              {"abort_walk_min", abort_walk_min},
-              {"turn_begin_value", turn_begin_value},
-              {"abort_recover_s", abort_recover_s},
-              {"lookahead_delays_s", lookahead_delays_s},
-              {"lookahead_sides", lookahead_sides},
-              {"lookahead_straight_s", lookahead_straight_s},
-              {"lookahead_rank", lookahead_rank},
-              {"lookahead_detour_deg", lookahead_detour_deg}};
+         {"reach_m", reach_m},
+         {"lookahead_m", lookahead_m},
+         {"aim_m", aim_m},
+         {"sit_yaw_deg", sit_yaw_deg},
+         {"turn_max_s", turn_max_s},
+         {"turn_min_s", turn_min_s},
+         {"calibration_runs", calibration_runs},
+         {"calibration_seed", calibration_seed},
+         {"side", side},
+         {"approach_deg", approach_deg},
+         {"regress_start_state", regress_start_state},
+         {"clearance_m", clearance_m},
+         {"avoid_front_m", avoid_front_m},
+         {"turn_value_min", turn_value_min},
+         {"sit_value_min", sit_value_min},
+         {"value_wait_s", value_wait_s},
+         {"sit_value_early", sit_value_early},
+         {"sit_value_yaw_deg", sit_value_yaw_deg},
+         {"turn_abort_value", turn_abort_value},
+         {"sit_retry_value", sit_retry_value},
+         {"abort_walk_min", abort_walk_min},
+         {"turn_begin_value", turn_begin_value},
+         {"abort_recover_s", abort_recover_s},
+         {"lookahead_delays_s", lookahead_delays_s},
+         {"lookahead_sides", lookahead_sides},
+         {"lookahead_straight_s", lookahead_straight_s},
+         {"lookahead_rank", lookahead_rank},
+         {"lookahead_detour_deg", lookahead_detour_deg}};
   // Written only when on, so that every other config resolves as before.
   if (calibration_allow_falls) j["calibration_allow_falls"] = true;
   return j;
@@ -431,9 +431,9 @@ MetaPlan MeasurePlan(HumanoidChairEnv& env, SubtaskPolicies& policies, const Jso
     const int id = side == 0 ? kLeftTurn : kRightTurn;
     if (!PlannerTakesTurn(planner, id)) continue;
     task.set_active(id);
-    plan.turns[side] = CalibrateTurn(env, policies, id, planner.calibration_runs,
-                                     planner.calibration_seed, planner.turn_max_s,
-                                     planner.calibration_allow_falls);
+    plan.turns[side] =
+        CalibrateTurn(env, policies, id, planner.calibration_runs, planner.calibration_seed,
+                      planner.turn_max_s, planner.calibration_allow_falls);
   }
   plan.sit_start = SitClipStart(sit_saved, env.config(), "planner: sit policy " + sit_name);
   plan.sit_start.xy += Eigen::Rotation2Dd(env.config().chair_placement.yaw) *

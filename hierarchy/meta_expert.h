@@ -1,6 +1,6 @@
-// A scripted meta controller (ours; issue 15): the planned hand-over of tasks/chain_plan.h decided
-// at the meta controller's own rate, through MetaEnv's hybrid action. It is the teacher a meta
-// policy is cloned from (learner/local/meta_clone.h) and a row of the evaluation ("planner").
+// A scripted meta controller (ours; issue 15): the planned hand-over of hierarchy/chain_plan.h
+// decided at the meta controller's own rate, through MetaEnv's hybrid action. It is the teacher a
+// meta policy is cloned from (learner/local/meta_clone.h) and a row of the evaluation ("planner").
 //
 // Each meta step: while walking, steer the walker so that the turn would end where the sit's clip
 // starts, and choose the turn at the decision whose predicted turn end is nearest to it; while
@@ -14,7 +14,7 @@
 #include "common/env.h"
 #include "common/json_util.h"
 #include "common/rng.h"
-#include "tasks/chain_plan.h"
+#include "hierarchy/chain_plan.h"
 #include "tasks/task_env.h"
 
 namespace perch {
@@ -32,7 +32,7 @@ class MetaPlanner {
   // action[3] = [class index in env.meta().choices, theta rad, dist m].
   void Act(const MetaEnv& env, float* action);
   // The turn's side (0 left, 1 right), -1 before the first decision; set_side fixes it (the
-  // lookahead tries both, tasks/meta_lookahead.h).
+  // lookahead tries both, hierarchy/meta_lookahead.h).
   int side() const { return side_; }
   void set_side(int side) { side_ = side; }
 

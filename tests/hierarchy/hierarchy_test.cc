@@ -1,4 +1,4 @@
-#include "tasks/hierarchy.h"
+#include "hierarchy/hierarchy.h"
 
 #include <gtest/gtest.h>
 

@@ -18,7 +18,7 @@
 #include "common/env.h"
 #include "common/rng.h"
 #include "envs/humanoid_env.h"
-#include "tasks/hierarchy.h"
+#include "hierarchy/hierarchy.h"
 #include "tasks/task_env.h"
 
 namespace perch {
@@ -44,7 +44,8 @@ struct MetaEpisode {
 
 // A meta episode's complete state (the humanoid env's, its task's memory, the subtasks' clocks
 // and the meta env's own): restored into a MetaEnv with the same config and frozen policies it
-// continues exactly as the env that saved it would after restoring it too (tasks/meta_lookahead.h).
+// continues exactly as the env that saved it would after restoring it too
+// (hierarchy/meta_lookahead.h).
 struct MetaEnvState {
   EnvState env;
   Json task_memory;

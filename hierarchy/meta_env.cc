@@ -1,4 +1,4 @@
-#include "tasks/meta_env.h"
+#include "hierarchy/meta_env.h"
 
 #include <algorithm>
 #include <cmath>

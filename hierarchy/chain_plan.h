@@ -136,7 +136,7 @@ struct PlannerConfig {
   // After a hand-back, the walker walks straight on for this long before the turn is planned
   // again [s]. 0: plans at once.
   double abort_recover_s = 0.0;
-  // Lookahead (ours, stop 39; tasks/meta_lookahead.h): at every decision where the rules above
+  // Lookahead (ours, stop 39; hierarchy/meta_lookahead.h): at every decision where the rules above
   // switch subtasks, the switch now and the switch delayed by each of these times (the running
   // subtask goes on meanwhile) are each simulated to the episode's end with the rules above, and
   // the best outcome is taken [s]. Empty: off.

@@ -1,4 +1,4 @@
-#include "tasks/meta_lookahead.h"
+#include "hierarchy/meta_lookahead.h"
 
 #include <algorithm>
 #include <cmath>

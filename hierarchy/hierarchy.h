@@ -18,8 +18,8 @@
 #include "common/subtasks.h"
 #include "envs/humanoid_env.h"
 #include "envs/pose_frame.h"
+#include "hierarchy/chain_plan.h"
 #include "policy/policy.h"
-#include "tasks/chain_plan.h"
 #include "tasks/clip_task.h"
 #include "tasks/recording.h"
 #include "tasks/task_env.h"
@@ -56,7 +56,7 @@ struct MetaConfig {
   // its first control steps (docs/journal/meta.md "Stop 43").
   int blend_steps = 0;
   // The scripted planner that teaches this meta (perch meta-clone) and its evaluation row
-  // (perch eval --planner); tasks/meta_expert.h.
+  // (perch eval --planner); hierarchy/meta_expert.h.
   PlannerConfig planner;
   // Frozen subtask checkpoints by SubtaskId (the fine-tuned ones, as the authors' chain).
   std::array<std::string, 4> subtasks{"models/turn_left_from_walk/policy.bin",
@@ -192,9 +192,9 @@ struct ChainOptions {
   double sit_yaw_deg = 0.0;
   double turn_min_s = 0.3;
   std::string side = "short";  // which turn: "short" (the short way round), "left", "right"
-  // The planned hand-over (tasks/chain_plan.h; ours): walk so that the turn ends where the sit's
-  // clip starts, and hand over to the turn when its predicted end is there. The side is chosen
-  // once per episode ("short": by the heading at the spawn).
+  // The planned hand-over (hierarchy/chain_plan.h; ours): walk so that the turn ends where the
+  // sit's clip starts, and hand over to the turn when its predicted end is there. The side is
+  // chosen once per episode ("short": by the heading at the spawn).
   bool plan = false;
   PlannerConfig planner;  // its rules (sit_yaw_deg and turn_max_s: the chain's own above)
   // Switches (and walk-target updates) only every this many control steps: 30 is what a meta
@@ -215,5 +215,11 @@ Json EvaluateChain(const TaskEnvConfig& config,
                    const std::array<std::string, kNumSubtasks>& model_paths,
                    const std::array<Json, kNumSubtasks>& saved_configs, const ChainOptions& o,
                    std::vector<PoseFrame>* frames);
+
+// Adds the hierarchy's task, sit_chair, to the task registry (tasks/registry.h), after the
+// built-in subtasks. The tasks' floor knows nothing of the hierarchy, so each program that reads
+// configs naming it calls this once at start (perch's main, the tests' main); calling it again
+// does nothing.
+void RegisterHierarchyTasks();
 
 }  // namespace perch

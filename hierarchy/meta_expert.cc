@@ -1,13 +1,13 @@
-#include "tasks/meta_expert.h"
+#include "hierarchy/meta_expert.h"
 
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 
 #include "common/proto/model.pb.h"
-#include "tasks/hierarchy.h"
+#include "hierarchy/hierarchy.h"
+#include "hierarchy/meta_env.h"
 #include "tasks/imitation.h"
-#include "tasks/meta_env.h"
 
 namespace perch {
 
