@@ -1,5 +1,5 @@
 // The meta controller's transition matrix (which subtask follows which, per start side) drawn as
-// a PNG from the "transitions" object of a meta evaluation's JSON (tasks/meta_eval.h).
+// a PNG from the "transitions" object of a meta evaluation's JSON (hierarchy/meta_eval.h).
 #pragma once
 
 #include <string>
