@@ -7,8 +7,10 @@
 
 namespace perch {
 
-void RegisterBenchCommands(CLI::App& /*root*/, CLI::App& bench) {
-  // perch bench flow
+namespace {
+
+// perch bench flow
+void RegisterBenchFlow(CLI::App& bench) {
   auto ff = std::make_shared<BenchFlowFlags>();
   CLI::App* fl = bench.add_subcommand(
       "flow", "Flow control: stale drops, learner samples/s and actor CPU with and without credit");
@@ -20,8 +22,10 @@ void RegisterBenchCommands(CLI::App& /*root*/, CLI::App& bench) {
     const int rc = RunBenchFlow(*ff);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });
+}
 
-  // perch bench scale
+// perch bench scale
+void RegisterBenchScale(CLI::App& bench) {
   auto scf = std::make_shared<BenchScaleFlags>();
   CLI::App* sc = bench.add_subcommand(
       "scale", "One learner fed by N synthetic actors (recorded segments replayed over loopback)");
@@ -40,8 +44,10 @@ void RegisterBenchCommands(CLI::App& /*root*/, CLI::App& bench) {
     const int rc = RunBenchScale(*scf);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });
+}
 
-  // perch bench group
+// perch bench group
+void RegisterBenchGroup(CLI::App& bench) {
   auto gf = std::make_shared<BenchGroupFlags>();
   CLI::App* g = bench.add_subcommand(
       "group", "The learner group's gradient all-reduce over loopback TCP, per operation");
@@ -53,8 +59,10 @@ void RegisterBenchCommands(CLI::App& /*root*/, CLI::App& bench) {
     const int rc = RunBenchGroup(*gf);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });
+}
 
-  // perch bench cluster
+// perch bench cluster
+void RegisterBenchCluster(CLI::App& bench) {
   auto bf = std::make_shared<BenchFlags>();
   CLI::App* b = bench.add_subcommand("cluster", "Cluster throughput vs the env alone");
   b->add_option("--config", bf->config, "experiment config");
@@ -70,8 +78,10 @@ void RegisterBenchCommands(CLI::App& /*root*/, CLI::App& bench) {
     const int rc = RunBenchCluster(*bf);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });
+}
 
-  // perch bench train
+// perch bench train
+void RegisterBenchTrain(CLI::App& bench) {
   auto tb = std::make_shared<BenchTrainFlags>();
   CLI::App* bt = bench.add_subcommand(
       "train", "A short training run (learner + actors) with baseline and candidate settings");
@@ -92,6 +102,16 @@ void RegisterBenchCommands(CLI::App& /*root*/, CLI::App& bench) {
     const int rc = RunBenchTrain(*tb);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });
+}
+
+}  // namespace
+
+void RegisterBenchCommands(CLI::App& /*root*/, CLI::App& bench) {
+  RegisterBenchFlow(bench);
+  RegisterBenchScale(bench);
+  RegisterBenchGroup(bench);
+  RegisterBenchCluster(bench);
+  RegisterBenchTrain(bench);
 }
 
 }  // namespace perch

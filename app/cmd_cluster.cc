@@ -325,10 +325,8 @@ int RunTrain(const TrainFlags& f) {
   return RunLocalTraining(o);
 }
 
-}  // namespace
-
-void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
-  // perch keygen
+// perch keygen
+void RegisterKeygen(CLI::App& root) {
   auto kf = std::make_shared<KeygenFlags>();
   CLI::App* kg =
       root.add_subcommand("keygen", "Write the cluster's CURVE key pairs (learner, actors)");
@@ -338,8 +336,10 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
     const int rc = RunKeygen(*kf);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });
+}
 
-  // perch learner
+// perch learner
+void RegisterLearner(CLI::App& root) {
   auto lf = std::make_shared<LearnerFlags>();
   CLI::App* l = root.add_subcommand("learner", "Run the learner: PPO over rollouts from actors");
   l->add_option("--config", lf->config, "experiment config (JSON)")->required();
@@ -360,8 +360,10 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
     const int rc = RunLearner(*lf);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });
+}
 
-  // perch actor
+// perch actor
+void RegisterActor(CLI::App& root) {
   auto af = std::make_shared<ActorFlags>();
   CLI::App* a = root.add_subcommand("actor", "Run an actor: step envs, ship rollouts");
   a->add_option("--config", af->config,
@@ -382,8 +384,10 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
   a->add_option("--set", af->sets, "override a config field: section.field=VALUE (repeatable)");
   a->add_flag("--check-config", af->check_config, "validate config and flags, then exit");
   a->callback([af] { RunActor(*af); });
+}
 
-  // perch train
+// perch train
+void RegisterTrain(CLI::App& root) {
   auto tf = std::make_shared<TrainFlags>();
   CLI::App* t = root.add_subcommand("train", "Local launch: learner + N actor processes");
   t->add_option("--config", tf->config, "experiment config (JSON)")->required();
@@ -400,8 +404,10 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
     const int rc = RunTrain(*tf);
     if (rc != 0) throw CLI::RuntimeError(rc);
   });
+}
 
-  // perch run-summary
+// perch run-summary
+void RegisterRunSummary(CLI::App& root) {
   struct SummaryFlags {
     std::vector<std::string> run_dirs;
     std::string csv, plot;
@@ -438,6 +444,16 @@ void RegisterClusterCommands(CLI::App& root, CLI::App& bench) {
                 << " actors\n";
     }
   });
+}
+
+}  // namespace
+
+void RegisterClusterCommands(CLI::App& root, CLI::App& /*bench*/) {
+  RegisterKeygen(root);
+  RegisterLearner(root);
+  RegisterActor(root);
+  RegisterTrain(root);
+  RegisterRunSummary(root);
 }
 
 }  // namespace perch

@@ -35,9 +35,7 @@ std::string ReadBytes(const std::string& path) {
   return std::string((std::istreambuf_iterator<char>(in)), {});
 }
 
-}  // namespace
-
-void RegisterViewCommands(CLI::App& root, CLI::App& /*bench*/) {
+void RegisterExportBvh(CLI::App& root) {
   struct BvhArgs {
     std::string recording, clip, out;
     int episode = 0;
@@ -64,27 +62,29 @@ void RegisterViewCommands(CLI::App& root, CLI::App& /*bench*/) {
       const proto::Recording rec = ReadRecording(b->recording);
       std::string humanoid = HumanoidModel::DefaultPath();
       if (!rec.config_json().empty()) {
-        humanoid = TaskEnvConfig::FromJson(Json::parse(rec.config_json()),
-                                           b->recording + ": config")
-                       .env.HumanoidPath();
+        humanoid =
+            TaskEnvConfig::FromJson(Json::parse(rec.config_json()), b->recording + ": config")
+                .env.HumanoidPath();
       }
       const HumanoidModel model = HumanoidModel::Load(humanoid);
       const ReferenceMotion m = RecordedMotion(rec, b->episode, model, b->recording);
       SaveBvhFile(b->out, HumanoidMotionToBvh(model, m, rec.control_dt(), 0.0));
-      std::cerr << "export-bvh: episode " << b->episode << " (" << m.num_frames()
-                << " frames at " << 1.0 / rec.control_dt() << " Hz) -> " << b->out << "\n";
+      std::cerr << "export-bvh: episode " << b->episode << " (" << m.num_frames() << " frames at "
+                << 1.0 / rec.control_dt() << " Hz) -> " << b->out << "\n";
     } else {
-      const std::string path = b->clip.find('/') == std::string::npos &&
-                                       b->clip.find(".json") == std::string::npos
-                                   ? ResolveProjectPath("data/motions/" + b->clip + ".json")
-                                   : b->clip;
+      const std::string path =
+          b->clip.find('/') == std::string::npos && b->clip.find(".json") == std::string::npos
+              ? ResolveProjectPath("data/motions/" + b->clip + ".json")
+              : b->clip;
       const HumanoidModel model = HumanoidModel::Load(HumanoidModel::DefaultPath());
       const ReferenceMotion m = ReferenceMotion::Load(path);
       SaveBvhFile(b->out, HumanoidMotionToBvh(model, m, 1.0 / 60.0, 0.0));
       std::cerr << "export-bvh: clip " << m.name() << " -> " << b->out << "\n";
     }
   });
+}
 
+void RegisterView(CLI::App& root) {
   struct ViewArgs {
     std::string recording, viewer_dir;
     int port = 8765;
@@ -139,6 +139,13 @@ void RegisterViewCommands(CLI::App& root, CLI::App& /*bench*/) {
     if (timer) timer->detach();  // may still be sleeping after Ctrl-C; the process ends anyway
     g_server = nullptr;
   });
+}
+
+}  // namespace
+
+void RegisterViewCommands(CLI::App& root, CLI::App& /*bench*/) {
+  RegisterExportBvh(root);
+  RegisterView(root);
 }
 
 }  // namespace perch

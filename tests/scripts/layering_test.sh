@@ -24,7 +24,7 @@ may_include = {
     'experiment': ['common', 'envs', 'motion', 'policy', 'protocol', 'tasks', 'hierarchy'],
     'learner': ['common', 'policy', 'protocol'],
     'learner/local': ['common', 'envs', 'motion', 'policy', 'protocol', 'tasks', 'hierarchy',
-                      'learner'],
+                      'experiment', 'learner'],
     'learner/service': ['common', 'policy', 'protocol', 'experiment', 'learner'],
     'actor': ['common', 'envs', 'motion', 'policy', 'protocol', 'tasks', 'experiment'],
     'launch': ['common', 'envs', 'motion', 'policy', 'protocol', 'tasks', 'experiment', 'learner',
