@@ -132,9 +132,15 @@ std::vector<FrozenPolicyData> ExperimentFrozenPolicies(const ExperimentConfig& c
 }
 
 Json ConfigFieldTables() {
-  return Json{{"env", EnvConfigFields().Describe()},
-              {"ppo", PpoConfigFields().Describe()},
-              {"cluster", ClusterConfigFields().Describe()}};
+  Json t{{"env", EnvConfigFields().Describe()},
+         {"ppo", PpoConfigFields().Describe()},
+         {"cluster", ClusterConfigFields().Describe()}};
+  // Each task's own section (env.<task> in a config).
+  for (const std::string& name : TaskNames()) {
+    const TaskDef& d = GetTask(name, "--fields");
+    if (d.fields) t[name] = d.fields();
+  }
+  return t;
 }
 
 namespace {
@@ -162,11 +168,19 @@ std::string ConfigFieldsText(const std::string& section, bool json) {
   } else if (all.contains(section)) {
     pick[section] = all[section];
   } else {
-    throw ConfigError("--fields: unknown section \"" + section + "\" (env, ppo, cluster, all)");
+    std::string known = "env, ppo, cluster";
+    for (const std::string& name : TaskNames()) {
+      if (all.contains(name)) known += ", " + name;
+    }
+    throw ConfigError("--fields: unknown section \"" + section + "\" (" + known + ", all)");
   }
   if (json) return pick.dump(2) + "\n";
   std::vector<std::array<std::string, 4>> rows;
-  for (auto it = pick.begin(); it != pick.end(); ++it) FieldRows(it.value(), it.key(), &rows);
+  for (auto it = pick.begin(); it != pick.end(); ++it) {
+    // A task's section sits under env in a config.
+    const bool task = FindTask(it.key()) != nullptr;
+    FieldRows(it.value(), task ? "env." + it.key() : it.key(), &rows);
+  }
   size_t w0 = 0, w1 = 0;
   for (const auto& r : rows) {
     w0 = std::max(w0, r[0].size());

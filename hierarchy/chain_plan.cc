@@ -22,186 +22,158 @@ Eigen::Vector2d Rotate(double yaw, const Eigen::Vector2d& v) {
 
 }  // namespace
 
-PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
-  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(j,
-                 {"pass_m",
-                  "reach_m",
-                  "lookahead_m",
-                  "aim_m",
-                  "sit_yaw_deg",
-                  "turn_max_s",
-                  "turn_min_s",
-                  "calibration_runs",
-                  "calibration_allow_falls",
-                  "calibration_seed",
-                  "side",
-                  "approach_deg",
-                  "regress_start_state",
-                  "clearance_m",
-                  "avoid_front_m",
-                  "turn_value_min",
-                  "sit_value_min",
-                  "value_wait_s",
-                  "sit_value_early",
-                  "sit_value_yaw_deg",
-                  "turn_abort_value",
-                  "sit_retry_value",
-                  "abort_walk_min",
-                  "turn_begin_value",
-                  "abort_recover_s",
-                  "lookahead_delays_s",
-                  "lookahead_sides",
-                  "lookahead_straight_s",
-                  "lookahead_rank",
-                  "lookahead_detour_deg"},
-                 ctx);
-  PlannerConfig c;
-  GetOptional(j, "pass_m", c.pass_m, ctx);
-  GetOptional(j, "reach_m", c.reach_m, ctx);
-  GetOptional(j, "lookahead_m", c.lookahead_m, ctx);
-  GetOptional(j, "aim_m", c.aim_m, ctx);
-  GetOptional(j, "sit_yaw_deg", c.sit_yaw_deg, ctx);
-  GetOptional(j, "turn_max_s", c.turn_max_s, ctx);
-  GetOptional(j, "turn_min_s", c.turn_min_s, ctx);
-  GetOptional(j, "calibration_runs", c.calibration_runs, ctx);
-  GetOptional(j, "calibration_allow_falls", c.calibration_allow_falls, ctx);
-  GetOptional(j, "calibration_seed", c.calibration_seed, ctx);
-  GetOptional(j, "side", c.side, ctx);
-  GetOptional(j, "approach_deg", c.approach_deg, ctx);
-  GetOptional(j, "regress_start_state", c.regress_start_state, ctx);
-  GetOptional(j, "clearance_m", c.clearance_m, ctx);
-  GetOptional(j, "avoid_front_m", c.avoid_front_m, ctx);
-  GetOptional(j, "turn_value_min", c.turn_value_min, ctx);
-  GetOptional(j, "sit_value_min", c.sit_value_min, ctx);
-  GetOptional(j, "value_wait_s", c.value_wait_s, ctx);
-  GetOptional(j, "sit_value_early", c.sit_value_early, ctx);
-  GetOptional(j, "sit_value_yaw_deg", c.sit_value_yaw_deg, ctx);
-  GetOptional(j, "turn_abort_value", c.turn_abort_value, ctx);
-  GetOptional(j, "sit_retry_value", c.sit_retry_value, ctx);
-  GetOptional(j, "abort_walk_min", c.abort_walk_min, ctx);
-  c.turn_begin_value = c.turn_abort_value;
-  GetOptional(j, "turn_begin_value", c.turn_begin_value, ctx);
-  GetOptional(j, "abort_recover_s", c.abort_recover_s, ctx);
-  GetOptional(j, "lookahead_delays_s", c.lookahead_delays_s, ctx);
-  GetOptional(j, "lookahead_sides", c.lookahead_sides, ctx);
-  GetOptional(j, "lookahead_straight_s", c.lookahead_straight_s, ctx);
-  GetOptional(j, "lookahead_rank", c.lookahead_rank, ctx);
-  GetOptional(j, "lookahead_detour_deg", c.lookahead_detour_deg, ctx);
-  if (c.lookahead_detour_deg.size() > 8) {
-    throw ConfigError(ctx + ".lookahead_detour_deg: at most 8 headings");
-  }
-  for (double h : c.lookahead_detour_deg) {
-    if (!(std::abs(h) > 0 && std::abs(h) <= 180)) {
-      throw ConfigError(ctx + ".lookahead_detour_deg: each must be in [-180, 180] deg and not 0");
-    }
-  }
-  if (!c.lookahead_detour_deg.empty() && c.lookahead_straight_s.empty()) {
-    throw ConfigError(ctx + ".lookahead_detour_deg: needs lookahead_straight_s (how long)");
-  }
-  if (c.lookahead_rank != "sooner" && c.lookahead_rank != "nearer") {
-    throw ConfigError(ctx + ".lookahead_rank: must be \"sooner\" or \"nearer\", not \"" +
-                      c.lookahead_rank + "\"");
-  }
-  for (const auto& [name, list] : {std::pair<const char*, const std::vector<double>*>{
-                                       "lookahead_delays_s", &c.lookahead_delays_s},
-                                   {"lookahead_straight_s", &c.lookahead_straight_s}}) {
-    if (list->size() > 8) throw ConfigError(ctx + "." + name + ": at most 8 times");
-    for (double d : *list) {
-      if (!(d > 0 && d <= 3)) throw ConfigError(ctx + "." + name + ": each must be in (0, 3] s");
-    }
-  }
-  if (c.lookahead_sides && c.side != "short") {
-    throw ConfigError(ctx + ".lookahead_sides: needs side \"short\" (both turns)");
-  }
-  if (!(c.abort_recover_s >= 0 && c.abort_recover_s <= 5)) {
-    throw ConfigError(ctx + ".abort_recover_s: must be in [0, 5] s");
-  }
-  if (!(c.sit_retry_value >= 0)) {
-    throw ConfigError(ctx + ".sit_retry_value: must be >= 0 (0: off)");
-  }
-  if (!(c.turn_abort_value >= 0)) {
-    throw ConfigError(ctx + ".turn_abort_value: must be >= 0 (0: off)");
-  }
-  if (!(c.sit_value_early >= 0)) throw ConfigError(ctx + ".sit_value_early: must be >= 0 (0: off)");
-  if (!(c.sit_value_yaw_deg > 0 && c.sit_value_yaw_deg <= 90)) {
-    throw ConfigError(ctx + ".sit_value_yaw_deg: must be in (0, 90]");
-  }
-  if (!(c.turn_value_min >= 0) || !(c.sit_value_min >= 0)) {
-    throw ConfigError(ctx + ".turn_value_min / sit_value_min: must be >= 0 (0: off)");
-  }
-  if (!(c.value_wait_s >= 0 && c.value_wait_s <= 3)) {
-    throw ConfigError(ctx + ".value_wait_s: must be in [0, 3] s");
-  }
-  if (!(c.avoid_front_m >= -3 && c.avoid_front_m <= 3)) {
-    throw ConfigError(ctx + ".avoid_front_m: must be in [-3, 3] m");
-  }
-  if (!(c.clearance_m >= 0 && c.clearance_m <= 3)) {
-    throw ConfigError(ctx + ".clearance_m: must be in [0, 3] m");
-  }
-  if (!(c.approach_deg <= 90)) throw ConfigError(ctx + ".approach_deg: must be <= 90");
-  if (!(c.pass_m > 0 && c.pass_m <= 3)) throw ConfigError(ctx + ".pass_m: must be in (0, 3] m");
-  if (!(c.reach_m >= 0 && c.reach_m <= c.pass_m)) {
-    throw ConfigError(ctx + ".reach_m: must be in [0, pass_m]");
-  }
-  if (!(c.lookahead_m >= 0 && c.lookahead_m <= 5)) {
-    throw ConfigError(ctx + ".lookahead_m: must be in [0, 5] m");
-  }
-  if (!(std::abs(c.aim_m[0]) <= 1 && std::abs(c.aim_m[1]) <= 1)) {
-    throw ConfigError(ctx + ".aim_m: each within +-1 m");
-  }
-  if (!(c.sit_yaw_deg > 0 && c.sit_yaw_deg <= 90)) {
-    throw ConfigError(ctx + ".sit_yaw_deg: must be in (0, 90]");
-  }
-  if (!(c.turn_max_s > 0.3 && c.turn_max_s <= 10)) {
-    throw ConfigError(ctx + ".turn_max_s: must be in (0.3, 10] s");
-  }
-  if (!(c.turn_min_s >= 0 && c.turn_min_s < c.turn_max_s)) {
-    throw ConfigError(ctx + ".turn_min_s: must be in [0, turn_max_s)");
-  }
-  if (c.calibration_runs < 1 || c.calibration_runs > 1000) {
-    throw ConfigError(ctx + ".calibration_runs: must be in [1, 1000]");
-  }
-  if (c.side != "short" && c.side != "left" && c.side != "right") {
-    throw ConfigError(ctx + ".side: expected short, left or right, got \"" + c.side + "\"");
-  }
-  return c;
+namespace {
+
+// A list of at most 8 values, each in its range: the error says which of the two it broke.
+FieldRule<std::vector<double>> ShortList(std::function<bool(double)> each, std::string each_rule,
+                                         std::string too_many) {
+  const std::string rule = too_many + "; " + each_rule;
+  return {[each](const std::vector<double>& v) {
+            if (v.size() > 8) return false;
+            for (double x : v) {
+              if (!each(x)) return false;
+            }
+            return true;
+          },
+          rule,
+          [too_many, each_rule](const std::vector<double>& v) {
+            return v.size() > 8 ? too_many : each_rule;
+          }};
 }
 
-Json PlannerConfig::ToJson() const {
-  Json j{{"pass_m", pass_m},
-         {"reach_m", reach_m},
-         {"lookahead_m", lookahead_m},
-         {"aim_m", aim_m},
-         {"sit_yaw_deg", sit_yaw_deg},
-         {"turn_max_s", turn_max_s},
-         {"turn_min_s", turn_min_s},
-         {"calibration_runs", calibration_runs},
-         {"calibration_seed", calibration_seed},
-         {"side", side},
-         {"approach_deg", approach_deg},
-         {"regress_start_state", regress_start_state},
-         {"clearance_m", clearance_m},
-         {"avoid_front_m", avoid_front_m},
-         {"turn_value_min", turn_value_min},
-         {"sit_value_min", sit_value_min},
-         {"value_wait_s", value_wait_s},
-         {"sit_value_early", sit_value_early},
-         {"sit_value_yaw_deg", sit_value_yaw_deg},
-         {"turn_abort_value", turn_abort_value},
-         {"sit_retry_value", sit_retry_value},
-         {"abort_walk_min", abort_walk_min},
-         {"turn_begin_value", turn_begin_value},
-         {"abort_recover_s", abort_recover_s},
-         {"lookahead_delays_s", lookahead_delays_s},
-         {"lookahead_sides", lookahead_sides},
-         {"lookahead_straight_s", lookahead_straight_s},
-         {"lookahead_rank", lookahead_rank},
-         {"lookahead_detour_deg", lookahead_detour_deg}};
-  // Written only when on, so that every other config resolves as before.
-  if (calibration_allow_falls) j["calibration_allow_falls"] = true;
-  return j;
+// A string among a few; the error names the value.
+FieldRule<std::string> OneOf(std::vector<std::string> allowed, std::string rule,
+                             std::function<std::string(const std::string&)> message) {
+  return {[allowed](const std::string& v) {
+            return std::find(allowed.begin(), allowed.end(), v) != allowed.end();
+          },
+          std::move(rule), std::move(message)};
 }
+
+FieldRule<double> OffOrPositive() {
+  return Satisfies<double>([](const double& v) { return v >= 0; }, "must be >= 0 (0: off)");
+}
+
+}  // namespace
+
+const FieldTable<PlannerConfig>& PlannerConfigFields() {
+  using C = PlannerConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("pass_m", &C::pass_m, "hand over only when the predicted turn end is this close [m]",
+               Satisfies<double>([](const double& v) { return v > 0 && v <= 3; },
+                                 "must be in (0, 3] m"))
+          .Add("reach_m", &C::reach_m, "... at once when this close [m] (in [0, pass_m])")
+          .Add("lookahead_m", &C::lookahead_m, "walk targets are never nearer than this [m]",
+               InRange<double>(0, 5, "must be in [0, 5] m"))
+          .Add("aim_m", &C::aim_m, "turn end aim from the sit clip's start (chair frame) [m]",
+               Satisfies<std::array<double, 2>>(
+                   [](const std::array<double, 2>& v) {
+                     return std::abs(v[0]) <= 1 && std::abs(v[1]) <= 1;
+                   },
+                   "each within +-1 m"))
+          .Add("sit_yaw_deg", &C::sit_yaw_deg, "turn -> sit tolerance on the heading [deg]",
+               Satisfies<double>([](const double& v) { return v > 0 && v <= 90; },
+                                 "must be in (0, 90]"))
+          .Add("turn_max_s", &C::turn_max_s, "turn -> sit at the latest [s]",
+               Satisfies<double>([](const double& v) { return v > 0.3 && v <= 10; },
+                                 "must be in (0.3, 10] s"))
+          .Add("turn_min_s", &C::turn_min_s, "... and not before [s] (in [0, turn_max_s))")
+          .Add("calibration_runs", &C::calibration_runs, "turn runs measured for the plan",
+               InRange<int>(1, 1000, "must be in [1, 1000]"))
+          .Custom(
+              "calibration_allow_falls", "toy runs only: falling turns stand in for whole ones",
+              [](const Json& j, C& c, const std::string& ctx) {
+                GetOptional(j, "calibration_allow_falls", c.calibration_allow_falls, ctx);
+              },
+              // Written only when on, so that every other config resolves as before.
+              [](const C& c, Json& j) {
+                if (c.calibration_allow_falls) j["calibration_allow_falls"] = true;
+              })
+          .Add("calibration_seed", &C::calibration_seed, "seed of the calibration runs")
+          .Add("side", &C::side, "which turn: short (by the first heading), left or right",
+               OneOf({"short", "left", "right"}, "expected short, left or right",
+                     [](const std::string& v) {
+                       return "expected short, left or right, got \"" + v + "\"";
+                     }))
+          .Add("approach_deg", &C::approach_deg,
+               "approach the turn along a line at this angle to the sit's facing [deg]; < 0: off",
+               Satisfies<double>([](const double& v) { return v <= 90; }, "must be <= 90"))
+          .Add("regress_start_state", &C::regress_start_state,
+               "predict the turn's path from its start state")
+          .Add("clearance_m", &C::clearance_m, "walk round the chair this far from its centre [m]",
+               InRange<double>(0, 3, "must be in [0, 3] m"))
+          .Add("avoid_front_m", &C::avoid_front_m,
+               "... only while less than this far in front of the seat [m]",
+               InRange<double>(-3, 3, "must be in [-3, 3] m"))
+          .Add("turn_value_min", &C::turn_value_min, "value gate: turn's critic at least; 0: off")
+          .Add("sit_value_min", &C::sit_value_min, "value gate: sit's critic at least; 0: off")
+          .Add("value_wait_s", &C::value_wait_s, "value gate: wait at most [s]",
+               InRange<double>(0, 3, "must be in [0, 3] s"))
+          .Add("sit_value_early", &C::sit_value_early, "turn -> sit early at this sit value",
+               OffOrPositive())
+          .Add("sit_value_yaw_deg", &C::sit_value_yaw_deg, "... within this heading [deg]",
+               Satisfies<double>([](const double& v) { return v > 0 && v <= 90; },
+                                 "must be in (0, 90]"))
+          .Add("turn_abort_value", &C::turn_abort_value, "turn -> walk below this turn value",
+               OffOrPositive())
+          .Add("sit_retry_value", &C::sit_retry_value, "turn -> walk when the sit rates below",
+               OffOrPositive())
+          .Add("abort_walk_min", &C::abort_walk_min, "hand-backs need the walker's critic at least")
+          .CustomAlways(
+              "turn_begin_value", "begin a turn only from this turn value (default: the abort's)",
+              [](const Json& j, C& c, const std::string& ctx) {
+                c.turn_begin_value = c.turn_abort_value;
+                GetOptional(j, "turn_begin_value", c.turn_begin_value, ctx);
+              },
+              [](const C& c, Json& j) { j["turn_begin_value"] = c.turn_begin_value; })
+          .Add("abort_recover_s", &C::abort_recover_s, "walk straight on after a hand-back [s]",
+               InRange<double>(0, 5, "must be in [0, 5] s"))
+          .Add("lookahead_delays_s", &C::lookahead_delays_s,
+               "lookahead: switches delayed by each [s]",
+               ShortList([](double d) { return d > 0 && d <= 3; }, "each must be in (0, 3] s",
+                         "at most 8 times"))
+          .Add("lookahead_sides", &C::lookahead_sides,
+               "lookahead: both turns at the first decision")
+          .Add("lookahead_straight_s", &C::lookahead_straight_s,
+               "lookahead: walk straight on for each first [s]",
+               ShortList([](double d) { return d > 0 && d <= 3; }, "each must be in (0, 3] s",
+                         "at most 8 times"))
+          .Add("lookahead_rank", &C::lookahead_rank, "how successes rank: sooner or nearer",
+               OneOf({"sooner", "nearer"}, "must be \"sooner\" or \"nearer\"",
+                     [](const std::string& v) {
+                       return "must be \"sooner\" or \"nearer\", not \"" + v + "\"";
+                     }))
+          .Add("lookahead_detour_deg", &C::lookahead_detour_deg,
+               "lookahead: each straight walk also heading this far off [deg]",
+               ShortList([](double h) { return std::abs(h) > 0 && std::abs(h) <= 180; },
+                         "each must be in [-180, 180] deg and not 0", "at most 8 headings"))
+          .Rule([](const C& c, const std::string& ctx) {
+            if (!c.lookahead_detour_deg.empty() && c.lookahead_straight_s.empty()) {
+              return ctx + ".lookahead_detour_deg: needs lookahead_straight_s (how long)";
+            }
+            if (c.lookahead_sides && c.side != "short") {
+              return ctx + ".lookahead_sides: needs side \"short\" (both turns)";
+            }
+            if (!(c.turn_value_min >= 0) || !(c.sit_value_min >= 0)) {
+              return ctx + ".turn_value_min / sit_value_min: must be >= 0 (0: off)";
+            }
+            if (!(c.reach_m >= 0 && c.reach_m <= c.pass_m)) {
+              return ctx + ".reach_m: must be in [0, pass_m]";
+            }
+            if (!(c.turn_min_s >= 0 && c.turn_min_s < c.turn_max_s)) {
+              return ctx + ".turn_min_s: must be in [0, turn_max_s)";
+            }
+            return std::string();
+          });
+  return t;
+}
+
+PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
+  return PlannerConfigFields().Read(j, ctx);
+}
+
+Json PlannerConfig::ToJson() const { return PlannerConfigFields().Write(*this); }
 
 Eigen::Vector2d TurnCalibration::DisplacementAt(double rotation) const {
   for (size_t k = 0; k < rotation_rad.size(); ++k) {

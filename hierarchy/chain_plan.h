@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "common/field_table.h"
 #include "common/json_util.h"
 #include "envs/env_config.h"
 #include "envs/humanoid_env.h"
@@ -161,6 +162,9 @@ struct PlannerConfig {
   static PlannerConfig FromJson(const Json& j, const std::string& ctx);
   Json ToJson() const;
 };
+
+// PlannerConfig's fields, each written once (common/field_table.h).
+const FieldTable<PlannerConfig>& PlannerConfigFields();
 
 struct PlanRule {
   double reach_m = 0.08;     // hand over when the predicted turn end is this close to the sit start

@@ -8,6 +8,7 @@
 #include "common/paths.h"
 #include "envs/spawn.h"
 #include "hierarchy/chain_plan.h"
+#include "tasks/config_fields.h"
 #include "tasks/imitation.h"
 #include "tasks/registry.h"
 #include "tasks/state_bank.h"
@@ -17,72 +18,73 @@
 
 namespace perch {
 
-MetaConfig MetaConfig::FromJson(const Json& j, const std::string& ctx) {
-  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(j,
-                 {"choices", "period", "subtask_stochastic", "fixed_order", "observe_active",
-                  "active_time_scale_s", "observe_values", "blend_steps", "subtasks", "planner"},
-                 ctx);
-  MetaConfig c;
-  GetOptional(j, "choices", c.choices, ctx);
-  GetOptional(j, "period", c.period, ctx);
-  GetOptional(j, "subtask_stochastic", c.subtask_stochastic, ctx);
-  GetOptional(j, "fixed_order", c.fixed_order, ctx);
-  GetOptional(j, "observe_active", c.observe_active, ctx);
-  GetOptional(j, "active_time_scale_s", c.active_time_scale_s, ctx);
-  GetOptional(j, "observe_values", c.observe_values, ctx);
-  GetOptional(j, "blend_steps", c.blend_steps, ctx);
-  if (c.blend_steps < 0 || c.blend_steps > 120) {
-    throw ConfigError(ctx + ".blend_steps: must be in [0, 120] control steps");
-  }
-  if (j.contains("planner")) c.planner = PlannerConfig::FromJson(j["planner"], ctx + ".planner");
-  if (!(c.active_time_scale_s > 0)) throw ConfigError(ctx + ".active_time_scale_s: must be > 0");
-  if (j.contains("subtasks")) {
-    const Json& s = j["subtasks"];
-    const std::string sc = ctx + ".subtasks";
-    if (!s.is_object()) throw ConfigError(sc + ": expected an object");
-    CheckKnownKeys(s, SubtaskNames(), sc);
-    for (int id = 0; id < kNumSubtasks; ++id) GetOptional(s, SubtaskName(id), c.subtasks[id], sc);
-  }
-  if (c.period < 1) throw ConfigError(ctx + ".period: must be >= 1");
-  if (c.choices.empty()) throw ConfigError(ctx + ".choices: must not be empty");
-  for (size_t i = 0; i < c.choices.size(); ++i) {
-    if (SubtaskIdOf(c.choices[i]) < 0) {
-      throw ConfigError(ctx + ".choices[" + std::to_string(i) + "]: unknown subtask \"" +
-                        c.choices[i] + "\" (turn_left, turn_right, sit, walk)");
-    }
-    for (size_t k = 0; k < i; ++k) {
-      if (c.choices[k] == c.choices[i]) {
-        throw ConfigError(ctx + ".choices: \"" + c.choices[i] + "\" twice");
-      }
-    }
-  }
-  if (c.target_choice() < 0) {
-    throw ConfigError(ctx + ".choices: must contain walk (the meta's target head drives it)");
-  }
-  for (int id : c.choice_ids()) {
-    if (c.subtasks[id].empty()) {
-      throw ConfigError(ctx + ".subtasks." + SubtaskName(id) +
-                        ": no checkpoint for a chosen subtask");
-    }
-  }
-  return c;
+const FieldTable<MetaConfig>& MetaConfigFields() {
+  using C = MetaConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("choices", &C::choices,
+               "the switch's classes in order (SubtaskId names; must contain walk)")
+          .Add("period", &C::period, "control steps per meta decision (30: about 2 Hz)",
+               Satisfies<int>([](const int& v) { return v >= 1; }, "must be >= 1"))
+          .Add("subtask_stochastic", &C::subtask_stochastic, "subtasks sample their actions")
+          .Add("fixed_order", &C::fixed_order, "Table 3 baselines: keep or trigger the next")
+          .Add("observe_active", &C::observe_active,
+               "ours: observe the acting subtask and its time")
+          .Add("active_time_scale_s", &C::active_time_scale_s, "the acting time's scale [s]",
+               Positive<double>())
+          .Add("observe_values", &C::observe_values, "ours: observe the subtasks' critics")
+          .Add("blend_steps", &C::blend_steps, "ours: cross-fade after a switch [control steps]",
+               InRange<int>(0, 120, "must be in [0, 120] control steps"))
+          .Nested("planner", &C::planner, PlannerConfigFields(),
+                  "the scripted planner (perch meta-clone, perch eval --planner)")
+          .Custom(
+              "subtasks", "frozen subtask checkpoints by name",
+              [](const Json& j, C& c, const std::string& ctx) {
+                const Json& s = j["subtasks"];
+                const std::string sc = ctx + ".subtasks";
+                if (!s.is_object()) throw ConfigError(sc + ": expected an object");
+                CheckKnownKeys(s, SubtaskNames(), sc);
+                for (int id = 0; id < kNumSubtasks; ++id) {
+                  GetOptional(s, SubtaskName(id), c.subtasks[id], sc);
+                }
+              },
+              [](const C& c, Json& j) {
+                Json subs = Json::object();
+                for (int id = 0; id < kNumSubtasks; ++id) subs[SubtaskName(id)] = c.subtasks[id];
+                j["subtasks"] = subs;
+              })
+          .Rule([](const C& c, const std::string& ctx) {
+            if (c.choices.empty()) return ctx + ".choices: must not be empty";
+            for (size_t i = 0; i < c.choices.size(); ++i) {
+              if (SubtaskIdOf(c.choices[i]) < 0) {
+                return ctx + ".choices[" + std::to_string(i) + "]: unknown subtask \"" +
+                       c.choices[i] + "\" (turn_left, turn_right, sit, walk)";
+              }
+              for (size_t k = 0; k < i; ++k) {
+                if (c.choices[k] == c.choices[i]) {
+                  return ctx + ".choices: \"" + c.choices[i] + "\" twice";
+                }
+              }
+            }
+            if (c.target_choice() < 0) {
+              return ctx + ".choices: must contain walk (the meta's target head drives it)";
+            }
+            for (int id : c.choice_ids()) {
+              if (c.subtasks[id].empty()) {
+                return ctx + ".subtasks." + SubtaskName(id) +
+                       ": no checkpoint for a chosen subtask";
+              }
+            }
+            return std::string();
+          });
+  return t;
 }
 
-Json MetaConfig::ToJson() const {
-  Json subs = Json::object();
-  for (int id = 0; id < kNumSubtasks; ++id) subs[SubtaskName(id)] = subtasks[id];
-  return Json{{"choices", choices},
-              {"period", period},
-              {"fixed_order", fixed_order},
-              {"subtask_stochastic", subtask_stochastic},
-              {"observe_active", observe_active},
-              {"active_time_scale_s", active_time_scale_s},
-              {"observe_values", observe_values},
-              {"blend_steps", blend_steps},
-              {"planner", planner.ToJson()},
-              {"subtasks", subs}};
+MetaConfig MetaConfig::FromJson(const Json& j, const std::string& ctx) {
+  return MetaConfigFields().Read(j, ctx);
 }
+
+Json MetaConfig::ToJson() const { return MetaConfigFields().Write(*this); }
 
 int MetaConfig::obs_dim() const {
   return ObsLayoutDim(ObsLayout::kProprioChair) + (observe_active ? kNumSubtasks + 1 : 0) +
@@ -102,39 +104,30 @@ std::vector<int> MetaConfig::choice_ids() const {
   return ids;
 }
 
-SitChairTaskConfig SitChairTaskConfig::FromJson(const Json& j, const std::string& ctx) {
-  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(j,
-                 {"support_reward", "approach_weight", "fall_penalty", "min_root_z",
-                  "sit_min_root_z", "max_episode_steps", "start", "success_contact_s", "meta"},
-                 ctx);
-  SitChairTaskConfig c;
-  GetOptional(j, "support_reward", c.support_reward, ctx);
-  GetOptional(j, "approach_weight", c.approach_weight, ctx);
-  GetOptional(j, "fall_penalty", c.fall_penalty, ctx);
-  if (!(c.fall_penalty >= 0)) throw ConfigError(ctx + ".fall_penalty: must be >= 0");
-  GetOptional(j, "min_root_z", c.min_root_z, ctx);
-  GetOptional(j, "sit_min_root_z", c.sit_min_root_z, ctx);
-  GetOptional(j, "max_episode_steps", c.max_episode_steps, ctx);
-  if (j.contains("start")) c.start = BankStartConfig::FromJson(j["start"], ctx + ".start");
-  GetOptional(j, "success_contact_s", c.success_contact_s, ctx);
-  if (j.contains("meta")) c.meta = MetaConfig::FromJson(j["meta"], ctx + ".meta");
-  if (c.max_episode_steps < 1) throw ConfigError(ctx + ".max_episode_steps: must be >= 1");
-  if (!(c.success_contact_s > 0)) throw ConfigError(ctx + ".success_contact_s: must be > 0");
-  return c;
+const FieldTable<SitChairTaskConfig>& SitChairTaskConfigFields() {
+  using C = SitChairTaskConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("support_reward", &C::support_reward, "Eq. 8: while the pelvis is on the seat")
+          .Add("approach_weight", &C::approach_weight, "Eq. 8: x (-V_sit) otherwise")
+          .Add("fall_penalty", &C::fall_penalty, "ours: on the meta step that ends in a fall",
+               NonNegative<double>())
+          .Add("min_root_z", &C::min_root_z, "early termination below [m]")
+          .Add("sit_min_root_z", &C::sit_min_root_z, "... while the sit acts [m]")
+          .Add("max_episode_steps", &C::max_episode_steps, "time limit [control steps]",
+               Satisfies<int>([](const int& v) { return v >= 1; }, "must be >= 1"))
+          .With(StartField<C>)
+          .Add("success_contact_s", &C::success_contact_s, "seated this long: success [s]",
+               Positive<double>())
+          .Nested("meta", &C::meta, MetaConfigFields(), "the meta controller");
+  return t;
 }
 
-Json SitChairTaskConfig::ToJson() const {
-  return Json{{"support_reward", support_reward},
-              {"approach_weight", approach_weight},
-              {"fall_penalty", fall_penalty},
-              {"min_root_z", min_root_z},
-              {"sit_min_root_z", sit_min_root_z},
-              {"max_episode_steps", max_episode_steps},
-              {"start", start.ToJson()},
-              {"success_contact_s", success_contact_s},
-              {"meta", meta.ToJson()}};
+SitChairTaskConfig SitChairTaskConfig::FromJson(const Json& j, const std::string& ctx) {
+  return SitChairTaskConfigFields().Read(j, ctx);
 }
+
+Json SitChairTaskConfig::ToJson() const { return SitChairTaskConfigFields().Write(*this); }
 
 SitChairTask::SitChairTask(const SitChairTaskConfig& c, double control_dt)
     : c_(c), dt_(control_dt) {}
@@ -511,6 +504,7 @@ TaskDef SitChairDef() {
         SitChairTaskConfig::FromJson(j != nullptr ? *j : Json::object(), ctx));
   };
   d.write = [](const TaskEnvConfig& c) { return c.Section<SitChairTaskConfig>().ToJson(); };
+  d.fields = [] { return SitChairTaskConfigFields().Describe(); };
   d.check = [](const TaskEnvConfig& c, const std::string& ctx) {
     CheckStartBanks(c.Section<SitChairTaskConfig>().start, c, ctx + ".sit_chair");
   };

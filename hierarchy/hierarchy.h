@@ -93,6 +93,10 @@ struct SitChairTaskConfig {
   Json ToJson() const;
 };
 
+// The sit_chair section's and the meta's fields, each written once (common/field_table.h).
+const FieldTable<MetaConfig>& MetaConfigFields();
+const FieldTable<SitChairTaskConfig>& SitChairTaskConfigFields();
+
 class SitChairTask : public Task {
  public:
   explicit SitChairTask(const SitChairTaskConfig& c, double control_dt);

@@ -49,6 +49,7 @@ TaskDef WalkDef() {
     if (j != nullptr) c->walk = WalkTaskConfig::FromJson(*j, ctx);
   };
   d.write = [](const TaskEnvConfig& c) { return c.walk.ToJson(); };
+  d.fields = [] { return WalkTaskConfigFields().Describe(); };
   d.check = [](const TaskEnvConfig& c, const std::string& ctx) {
     CheckStartBanks(c.walk.start, c, ctx + ".walk");
   };
@@ -57,19 +58,7 @@ TaskDef WalkDef() {
   };
   d.evaluate = [](const TaskEnvConfig& c, const proto::ModelWeights& w, const EvalOptions& o,
                   EvalRecording* rec) {
-    WalkEvalOptions wo;
-    wo.episodes = o.episodes;
-    wo.seed = o.seed;
-    wo.stochastic = o.stochastic;
-    wo.no_fall_s = o.no_fall_s;
-    wo.foot_sliding = o.foot_sliding;
-    wo.recorder = o.recorder;
-    WalkEvalRecording wr;
-    Json j = EvaluateWalk(c, w, wo, rec != nullptr ? &wr : nullptr);
-    if (rec != nullptr) {
-      rec->frames = std::move(wr.frames);
-      rec->targets = std::move(wr.targets);
-    }
+    Json j = EvaluateWalk(c, w, o, rec);
     // The common keys: walk's success is staying up for the no-fall window.
     const int ok = static_cast<int>(std::lround(j["no_fall_rate"].get<double>() * o.episodes));
     const auto ci = WilsonInterval95(ok, o.episodes);
@@ -93,6 +82,9 @@ TaskDef TurnDef(const std::string& name) {
         TurnTaskConfig::FromJson(j != nullptr ? *j : Json::object(), ctx, name));
   };
   d.write = [](const TaskEnvConfig& c) { return c.Section<TurnTaskConfig>().ToJson(); };
+  d.fields = [name] {
+    return TurnTaskConfigFields().Describe(TurnTaskConfig::FromJson(Json::object(), name, name));
+  };
   d.check = [name](const TaskEnvConfig& c, const std::string& ctx) {
     CheckStartBanks(c.Section<TurnTaskConfig>().start, c, ctx + "." + name);
   };
@@ -120,6 +112,7 @@ TaskDef SitDef() {
         SitTaskConfig::FromJson(j != nullptr ? *j : Json::object(), ctx));
   };
   d.write = [](const TaskEnvConfig& c) { return c.Section<SitTaskConfig>().ToJson(); };
+  d.fields = [] { return SitTaskConfigFields().Describe(); };
   d.check = [](const TaskEnvConfig& c, const std::string& ctx) {
     CheckStartBanks(c.Section<SitTaskConfig>().start, c, ctx + ".sit");
     const Chair chair = Chair::Load(c.env.ChairPath());

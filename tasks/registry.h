@@ -55,6 +55,9 @@ struct TaskDef {
   std::function<Json(const TaskEnvConfig&, const proto::ModelWeights&, const EvalOptions&,
                      EvalRecording*)>
       evaluate;
+  // The section's field table as data (FieldTable::Describe: name, default, doc, rule), for
+  // `perch config --fields TASK`; null for a task without one.
+  std::function<Json()> fields;
 };
 
 // Adds a task (ConfigError when its name is taken or empty). A task's own file may register it

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "common/rng.h"
 #include "policy/policy.h"
 #include "tasks/sit.h"
 #include "tasks/turn.h"
@@ -18,55 +19,55 @@ std::array<double, 2> WilsonInterval95(int k, int n) {
   return {std::max(0.0, centre - half), std::min(1.0, centre + half)};
 }
 
-Json EvaluateEpisodes(const TaskEnvConfig& config, const proto::ModelWeights& weights,
-                      const EvalOptions& o, EpisodeMetrics* metrics, EvalRecording* rec) {
-  if (o.episodes < 1) throw ConfigError("eval: --episodes must be >= 1");
-  std::unique_ptr<HumanoidChairEnv> env = MakeTaskHumanoidEnv(config);
-  const EnvSpec& spec = env->spec();
+PolicyRunner MakeEvalPolicy(const proto::ModelWeights& weights, const EnvSpec& spec,
+                            const std::string& task) {
   const PolicyConfig pc = PolicyConfigFromShape(weights.shape(), "model");
   if (pc.kind != PolicyKind::kGaussian || pc.obs_dim != spec.obs_dim ||
       pc.act_dim != spec.act_dim) {
     throw ConfigError("model: shape " + weights.shape().kind() + " obs " +
                       std::to_string(pc.obs_dim) + " act " + std::to_string(pc.act_dim) +
-                      " does not fit the " + config.env.task + " env (gaussian obs " +
+                      " does not fit the " + task + " env (gaussian obs " +
                       std::to_string(spec.obs_dim) + " act " + std::to_string(spec.act_dim) + ")");
   }
   PolicyRunner runner(pc, NormalizerConfig());
   runner.LoadWeights(weights);
   runner.set_update_obs_stats(false);  // evaluation must not move the normaliser
+  return runner;
+}
 
+EpisodeTotals RunEvalEpisodes(HumanoidChairEnv* env, PolicyRunner* policy, const EvalOptions& o,
+                              const EpisodeLoop& loop, EpisodeObserver* observer,
+                              EvalRecording* rec) {
+  const EnvSpec& spec = env->spec();
   const double dt = spec.control_dt;
-  const int max_steps = std::max(spec.max_episode_steps, metrics->MinEpisodeSteps(*env));
   std::vector<float> obs(spec.obs_dim), next(spec.obs_dim), action(spec.act_dim);
-  int successes = 0, falls = 0, invalid = 0;
-  int64_t steps_total = 0;
-  double sum_return = 0, sum_sim = 0;
-  Json fall_times = Json::array(), fall_episodes = Json::array();
+  EpisodeTotals t;
   for (int e = 0; e < o.episodes; ++e) {
-    // Episode e depends only on (seed, e), as in walk's evaluation.
+    // (Rng::Seed scrambles its seed, so nearby integers give unrelated streams.)
     const uint64_t episode_seed = o.seed * 1000003ULL + static_cast<uint64_t>(e);
     env->Seed(2 * episode_seed);
     Rng act_rng(2 * episode_seed + 1);
     env->Reset(obs.data());
-    metrics->Start(*env);
+    observer->Begin(*env);
     if (o.recorder != nullptr) o.recorder->Begin(*env, e, 2 * episode_seed);
     auto record = [&](int step) {
       if (e != 0 || rec == nullptr) return;
       rec->frames.push_back(PoseFrameOf(env->humanoid_state(), step * dt));
+      if (loop.record_targets &&
+          (rec->targets.empty() || (rec->targets.back() - env->walk_target()).norm() > 1e-9)) {
+        rec->targets.push_back(env->walk_target());
+      }
     };
     record(0);
     int steps = 0;
     bool fell = false;
-    while (steps < max_steps) {
-      runner.Act(obs.data(), act_rng, !o.stochastic, nullptr, action.data());
+    while (steps < loop.max_steps) {
+      policy->Act(obs.data(), act_rng, !o.stochastic, nullptr, action.data());
       const StepResult r = env->Step(action.data(), next.data());
       ++steps;
-      sum_return += r.reward;
-      if (r.invalid) ++invalid;
-      if (!r.invalid) {
-        sum_sim += metrics->ImitationReward(*env);
-        metrics->Observe(*env, r);
-      }
+      t.sum_return += r.reward;
+      if (r.invalid) ++t.invalid;
+      if (!r.invalid) observer->Observe(*env, r, steps);
       if (o.recorder != nullptr) o.recorder->Step(*env, r);
       record(steps);
       obs.swap(next);
@@ -74,38 +75,78 @@ Json EvaluateEpisodes(const TaskEnvConfig& config, const proto::ModelWeights& we
         fell = true;
         break;
       }
-      // The task's time limit is lifted when the metric needs longer episodes.
+      if (r.truncated && loop.stop_at_truncation) break;
     }
     if (fell) {
-      ++falls;
-      fall_times.push_back(steps * dt);
-      fall_episodes.push_back(e);
+      ++t.falls;
+      t.fall_times.push_back(steps * dt);
+      t.fall_episodes.push_back(e);
     }
-    const bool success = metrics->Finish(*env, fell);
-    successes += success;
+    const bool success = observer->End(*env, e, steps, fell);
     if (o.recorder != nullptr) o.recorder->End(success, fell);
-    steps_total += steps;
+    t.steps += steps;
   }
+  return t;
+}
+
+namespace {
+
+// The clip tasks' metrics in the shared loop, and the imitation reward they report.
+class MetricsObserver : public EpisodeObserver {
+ public:
+  explicit MetricsObserver(EpisodeMetrics* m) : m_(m) {}
+  void Begin(const HumanoidChairEnv& env) override { m_->Start(env); }
+  void Observe(const HumanoidChairEnv& env, const StepResult& r, int /*steps*/) override {
+    sum_sim_ += m_->ImitationReward(env);
+    m_->Observe(env, r);
+  }
+  bool End(const HumanoidChairEnv& env, int /*episode*/, int /*steps*/, bool fell) override {
+    const bool success = m_->Finish(env, fell);
+    successes_ += success;
+    return success;
+  }
+  double sum_sim() const { return sum_sim_; }
+  int successes() const { return successes_; }
+
+ private:
+  EpisodeMetrics* m_;
+  double sum_sim_ = 0.0;
+  int successes_ = 0;
+};
+
+}  // namespace
+
+Json EvaluateEpisodes(const TaskEnvConfig& config, const proto::ModelWeights& weights,
+                      const EvalOptions& o, EpisodeMetrics* metrics, EvalRecording* rec) {
+  if (o.episodes < 1) throw ConfigError("eval: --episodes must be >= 1");
+  std::unique_ptr<HumanoidChairEnv> env = MakeTaskHumanoidEnv(config);
+  PolicyRunner policy = MakeEvalPolicy(weights, env->spec(), config.env.task);
+  EpisodeLoop loop;
+  // The task's time limit is lifted when the metric needs longer episodes.
+  loop.max_steps = std::max(env->spec().max_episode_steps, metrics->MinEpisodeSteps(*env));
+  MetricsObserver observer(metrics);
+  const EpisodeTotals t = RunEvalEpisodes(env.get(), &policy, o, loop, &observer, rec);
   const double n = o.episodes;
+  const int successes = observer.successes();
   const auto ci = WilsonInterval95(successes, o.episodes);
-  Json j{
-      {"task", config.env.task},
-      {"chair", config.env.chair},
-      {"model_version", weights.version()},
-      {"episodes", o.episodes},
-      {"seed", o.seed},
-      {"stochastic", o.stochastic},
-      {"episode_steps", max_steps},
-      {"successes", successes},
-      {"success_rate", successes / n},
-      {"success_ci95", {ci[0], ci[1]}},
-      {"fall_rate", falls / n},
-      {"invalid_episodes", invalid},
-      {"mean_episode_steps", steps_total / n},
-      {"mean_return", sum_return / n},
-      {"mean_imitation_reward", sum_sim / static_cast<double>(std::max<int64_t>(1, steps_total))},
-      {"fall_times_s", fall_times},
-      {"fall_episodes", fall_episodes}};
+  Json j{{"task", config.env.task},
+         {"chair", config.env.chair},
+         {"model_version", weights.version()},
+         {"episodes", o.episodes},
+         {"seed", o.seed},
+         {"stochastic", o.stochastic},
+         {"episode_steps", loop.max_steps},
+         {"successes", successes},
+         {"success_rate", successes / n},
+         {"success_ci95", {ci[0], ci[1]}},
+         {"fall_rate", t.falls / n},
+         {"invalid_episodes", t.invalid},
+         {"mean_episode_steps", t.steps / n},
+         {"mean_return", t.sum_return / n},
+         {"mean_imitation_reward",
+          observer.sum_sim() / static_cast<double>(std::max<int64_t>(1, t.steps))},
+         {"fall_times_s", t.fall_times},
+         {"fall_episodes", t.fall_episodes}};
   metrics->AddSummary(&j);
   return j;
 }

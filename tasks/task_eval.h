@@ -1,7 +1,9 @@
-// Evaluation of a subtask policy (perch eval --task T): one episode runner (seeding, mean or
-// sampled actions, falls, the frames of episode 0 for a filmstrip) and per-task metric plug-ins
-// (turn: heading at the end; sit: seated contact, seat position and orientation errors). Walk
-// keeps its own runner (tasks/walk_eval.h). Definitions: docs/subtasks.md.
+// Evaluation of a subtask policy (perch eval --task T): one episode runner for every task
+// (seeding, mean or sampled actions, falls, the recorder, the frames of episode 0 for a filmstrip),
+// RunEvalEpisodes, and what each task measures over it: turn and sit through EpisodeMetrics
+// plug-ins (turn: heading at the end; sit: seated contact, seat position and orientation errors)
+// and EvaluateEpisodes' common JSON; walk through its own observer (tasks/walk_eval.h).
+// Definitions: docs/subtasks.md.
 #pragma once
 
 #include <cstdint>
@@ -13,6 +15,7 @@
 #include "common/proto/model.pb.h"
 #include "envs/humanoid_env.h"
 #include "envs/pose_frame.h"
+#include "policy/policy.h"
 #include "tasks/foot_sliding.h"
 #include "tasks/recording.h"
 #include "tasks/task_env.h"
@@ -54,6 +57,45 @@ class EpisodeMetrics {
   virtual double ImitationReward(const HumanoidChairEnv& env) const = 0;  // this step's r^S
   virtual void AddSummary(Json* j) const = 0;
 };
+
+// What a task's evaluation observes in the shared episode loop (RunEvalEpisodes).
+class EpisodeObserver {
+ public:
+  virtual ~EpisodeObserver() = default;
+  // After the episode's Reset (before the recorder's Begin).
+  virtual void Begin(const HumanoidChairEnv& env) = 0;
+  // After each step the env did not flag invalid; `steps` counts this one.
+  virtual void Observe(const HumanoidChairEnv& env, const StepResult& r, int steps) = 0;
+  // The episode is over (fell: early termination); returns its success (for the recorder).
+  virtual bool End(const HumanoidChairEnv& env, int episode, int steps, bool fell) = 0;
+};
+
+// The loop's settings and what it counts over all episodes.
+struct EpisodeLoop {
+  int max_steps = 0;                // steps per episode at most
+  bool stop_at_truncation = false;  // also end an episode at the task's time limit
+  bool record_targets = false;      // the recording also keeps episode 0's distinct walk targets
+};
+struct EpisodeTotals {
+  int invalid = 0;    // steps the env flagged invalid
+  int falls = 0;      // episodes that ended early (terminated)
+  int64_t steps = 0;  // control steps over all episodes
+  double sum_return = 0.0;
+  Json fall_times = Json::array();     // [s] per fallen episode
+  Json fall_episodes = Json::array();  // index per fallen episode
+};
+
+// The policy of `weights` on an env of `spec`: Gaussian, its shapes those of the env
+// (ConfigError naming the task otherwise); evaluation never moves its normaliser.
+PolicyRunner MakeEvalPolicy(const proto::ModelWeights& weights, const EnvSpec& spec,
+                            const std::string& task);
+
+// Runs o.episodes episodes of `policy` on `env`. Episode e depends only on (o.seed, e): the env is
+// seeded with 2 s and the actions' noise with 2 s + 1, s = seed * 1000003 + e, so any episode can
+// be rerun alone.
+EpisodeTotals RunEvalEpisodes(HumanoidChairEnv* env, PolicyRunner* policy, const EvalOptions& o,
+                              const EpisodeLoop& loop, EpisodeObserver* observer,
+                              EvalRecording* rec);
 
 // Runs the episodes with `metrics` and returns the common JSON (task, episodes, success_rate,
 // success_ci95, fall_rate, mean_imitation_reward, mean_return, ...) plus the task's.

@@ -14,26 +14,13 @@
 #include "tasks/model_source.h"
 #include "tasks/recording.h"
 #include "tasks/task_env.h"
+#include "tasks/task_eval.h"
 
 namespace perch {
 
-struct WalkEvalOptions {
-  int episodes = 10;
-  uint64_t seed = 0;
-  bool stochastic = false;  // default: the Gaussian's mean
-  double no_fall_s = 10.0;  // an episode counts as no-fall if it stays up this long [s]
-  FootSlidingOptions foot_sliding;
-  EpisodeRecorder* recorder = nullptr;  // perch eval --record (not owned)
-};
-
-// Episode 0, for the filmstrip.
-struct WalkEvalRecording {
-  std::vector<PoseFrame> frames;
-  std::vector<Eigen::Vector2d> targets;  // distinct walk targets (target stage) [m]
-};
-
-// Runs the episodes. Episodes last at least no_fall_s (the time limit is raised when shorter).
+// Runs the episodes in the shared loop (tasks/task_eval.h). Episodes last at least o.no_fall_s
+// (the time limit is raised when shorter); recording: episode 0's poses and distinct targets.
 Json EvaluateWalk(const TaskEnvConfig& config, const proto::ModelWeights& weights,
-                  const WalkEvalOptions& options, WalkEvalRecording* recording);
+                  const EvalOptions& o, EvalRecording* recording);
 
 }  // namespace perch

@@ -174,5 +174,35 @@ TEST(CommittedConfigs, FieldTablesDescribeExactlyTheResolvedSections) {
   }
 }
 
+// Each task's own section (`perch config --fields TASK`): its table's rows are exactly the keys the
+// resolved section holds, with the defaults it records when the config leaves them out.
+TEST(CommittedConfigs, TaskFieldTablesDescribeExactlyTheirResolvedSections) {
+  const Json tables = ConfigFieldTables();
+  int tasks = 0;
+  for (const std::string& name : TaskNames()) {
+    if (!tables.contains(name)) continue;
+    SCOPED_TRACE(name);
+    ++tasks;
+    Json env{{"task", name}};
+    if (name == "sit_chair") env["sit_chair"] = {{"start", {{"banks", Json::array()}}}};
+    const Json values = TaskEnvConfig::FromJson(env, "t").ToJson()[name];
+    size_t rows = 0;
+    for (const Json& r : tables[name]) {
+      const std::string field = r["name"];
+      if (r.contains("default") && r["default"].is_null()) continue;  // written only when set
+      ++rows;
+      ASSERT_TRUE(values.contains(field)) << field;
+      if (r.contains("fields")) {
+        EXPECT_TRUE(values[field].is_object()) << field;
+      } else if (field != "start") {  // the test's own start (no bank to read)
+        EXPECT_EQ(r["default"], values[field]) << field;
+      }
+    }
+    EXPECT_EQ(rows, values.size());
+  }
+  // walk, the two turns, sit and the hierarchy's sit_chair.
+  EXPECT_EQ(tasks, 5);
+}
+
 }  // namespace
 }  // namespace perch

@@ -120,9 +120,15 @@ TEST_F(CliTest, ConfigFieldsListsEachSectionsFieldsWithDefaultsAndRanges) {
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_TRUE(Has(r.out, "env.physics.substeps")) << r.out;
   EXPECT_TRUE(Has(r.out, "env.spawn.zone1_deg")) << r.out;
+  // A task's section, under env: the hierarchy's sit_chair with its meta and planner.
+  r = Perch("config --fields sit_chair", false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_TRUE(Has(r.out, "env.sit_chair.meta.planner.side")) << r.out;
+  EXPECT_TRUE(Has(r.out, "must be in [0, 120] control steps")) << r.out;
   r = Perch("config --fields bogus");
   EXPECT_NE(r.code, 0);
   EXPECT_TRUE(Has(r.out, "unknown section \"bogus\"")) << r.out;
+  EXPECT_TRUE(Has(r.out, "sit_chair")) << r.out;
 }
 
 TEST_F(CliTest, EvalUsesTheCheckpointsConfigAndWarnsWhenConfigDiffers) {

@@ -11,8 +11,8 @@
 
 #include "common/proto/model.pb.h"
 #include "common/proto/wire.pb.h"
-#include "motion/reference_motion.h"
 #include "learner/ppo.h"
+#include "motion/reference_motion.h"
 #include "viz/canvas.h"
 
 namespace perch {
@@ -37,10 +37,10 @@ TEST(WalkEval, WellFormedAndReproducible) {
   TaskEnvConfig c = TaskEnvConfig::Defaults("walk");
   c.walk.stage = WalkStage::kTarget;
   const proto::ModelWeights w = Untrained(1);
-  WalkEvalOptions o;
+  EvalOptions o;
   o.episodes = 2;
   o.seed = 4;
-  WalkEvalRecording rec;
+  EvalRecording rec;
   const Json j = EvaluateWalk(c, w, o, &rec);
   EXPECT_EQ(j["episodes"], 2);
   for (const char* k : {"no_fall_rate", "mean_imitation_reward", "targets_reached_per_min",
@@ -74,7 +74,7 @@ TEST(WalkEval, TargetReachFractionCountsReachedAgainstTimedOut) {
   c.walk.min_root_z = -10.0;  // no falls: every episode runs to the time limit
   c.walk.max_episode_steps = 60;
   const proto::ModelWeights w = Untrained(2);
-  WalkEvalOptions o;
+  EvalOptions o;
   o.episodes = 1;
   o.no_fall_s = 1.0;
   c.walk.target_reach_m = 100.0;
@@ -97,7 +97,7 @@ TEST(WalkEval, TargetReachByDistanceBinsEachResolvedTarget) {
   c.walk.min_root_z = -10.0;
   c.walk.max_episode_steps = 60;
   const proto::ModelWeights w = Untrained(2);
-  WalkEvalOptions o;
+  EvalOptions o;
   o.episodes = 2;
   o.no_fall_s = 1.0;
   auto one_bin = [](const Json& j) {
@@ -130,7 +130,7 @@ TEST(WalkEval, FallsAreListedWithTheirTimeAndTargetAge) {
   c.walk.stage = WalkStage::kTarget;
   c.walk.max_episode_steps = 600;
   c.walk.reference_state_init = true;
-  WalkEvalOptions o;
+  EvalOptions o;
   o.episodes = 3;
   o.no_fall_s = 10.0;
   const Json j = EvaluateWalk(c, Untrained(4), o, nullptr);  // an untrained policy falls
@@ -192,7 +192,7 @@ TEST(WalkEval, ReadsWeightsAndLearnerStateAndRefusesCorruptFiles) {
   PpoLearner other(PolicyConfig::Subtask(57), PpoConfig::Subtask(), 3);
   proto::ModelWeights ow;
   other.ExportWeights(&ow);
-  EXPECT_THROW(EvaluateWalk(TaskEnvConfig::Defaults("walk"), ow, WalkEvalOptions(), nullptr),
+  EXPECT_THROW(EvaluateWalk(TaskEnvConfig::Defaults("walk"), ow, EvalOptions(), nullptr),
                ConfigError);
 }
 
@@ -287,16 +287,15 @@ TEST(EvalCommand, JsonAndFilmstripOfTheRightSize) {
 TEST(EvalCommand, ReadsTheEnvOfAnExperimentConfigAndOverridesTheStart) {
   if (!std::getenv("PERCH_BIN")) GTEST_SKIP() << "PERCH_BIN not set";
   const std::string model = Write("walk_cli_exp_w.bin", Untrained(6).SerializeAsString());
-  const Json exp{
-      {"seed", 3},
-      {"env",
-       {{"task", "walk"},
-        {"walk",
-         {{"stage", "forward"},
-          {"reference_state_init", false},
-          {"min_root_z", 0.7},
-          {"target_turn_prob", 0.3}}}}},
-      {"cluster", {{"task", "walk"}}}};
+  const Json exp{{"seed", 3},
+                 {"env",
+                  {{"task", "walk"},
+                   {"walk",
+                    {{"stage", "forward"},
+                     {"reference_state_init", false},
+                     {"min_root_z", 0.7},
+                     {"target_turn_prob", 0.3}}}}},
+                 {"cluster", {{"task", "walk"}}}};
   const std::string cfg = Write("walk_cli_exp.json", exp.dump());
   int rc = 0;
   std::string err;
@@ -369,8 +368,8 @@ TEST(EvalCommand, AverageModelsWritesTheMeanAndNeverOverwrites) {
   for (int k = 0; k < a.params_size(); k += 97) {
     EXPECT_FLOAT_EQ(avg.params(k), 0.5f * (a.params(k) + b.params(k))) << k;
   }
-  const Json j = Json::parse(
-      RunPerch("eval --task walk --model " + out + " --episodes 1 --json", &rc, &err));
+  const Json j =
+      Json::parse(RunPerch("eval --task walk --model " + out + " --episodes 1 --json", &rc, &err));
   ASSERT_EQ(rc, 0) << err;
   EXPECT_EQ(j["episodes"], 1);
 
