@@ -97,7 +97,18 @@ for x in a: print(x)' "$cmd")
 done
 [[ $checked -ge 2 ]] || fail "expected the learner and actor command lines, checked $checked"
 
-port=$((20000 + RANDOM % 20000))
+# Three consecutive free ports (a random pick could meet a port another test or run holds).
+port=$(python3 -c '
+import random, socket
+for _ in range(200):
+    p = random.randrange(20000, 40000)
+    try:
+        for q in (p, p + 1, p + 2):
+            s = socket.socket(); s.bind(("127.0.0.1", q)); s.close()
+        print(p); break
+    except OSError:
+        pass
+')
 "$perch" train --config configs/default.json --run-dir runs/smoke --actors 1 --max-samples 4096 \
   --set ppo.steps_per_update=2048 --set cluster.checkpoint_every=1 \
   --rollout-port "$port" --weights-port $((port + 1)) --metrics-port $((port + 2)) \
