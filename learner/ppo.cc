@@ -125,7 +125,7 @@ void PpoLearner::SeedShuffle(uint64_t seed, int rank) {
   rng_ = Rng(seed ^ 0x5bd1e995a4f3c2e1ULL ^ (0x9e3779b97f4a7c15ULL * static_cast<uint64_t>(rank)));
 }
 
-UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
+std::vector<int> PpoLearner::CheckBatch(const std::vector<Rollout>& rollouts) const {
   const int obs_dim = model_.obs_dim();
   const int act_size = model_.action_size();
   int n = 0;
@@ -172,13 +172,12 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
       group_n[r] = std::stoi(all[r].substr(3));
     }
   }
-  UpdateStats st;
-  int min_n = n, group_total = 0;
-  for (int nr : group_n) {
-    min_n = std::min(min_n, nr);
-    group_total += nr;
-  }
-  if (min_n == 0) return st;
+  return group_n;
+}
+
+void PpoLearner::AssembleBatch(const std::vector<Rollout>& rollouts, int n, UpdateStats* st) {
+  const int obs_dim = model_.obs_dim();
+  const int act_size = model_.action_size();
   // A group merges every member's statistics after the batch, in rank order (below).
   RunningMeanStd obs_delta(obs_dim, 0.0), ret_delta(1, 0.0);
   const RunningMeanStd ret_before = reward_scaler_.return_stats();
@@ -247,42 +246,45 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
     }
     off += t;
   }
-  if (group_ != nullptr) {
-    proto::RunningStats po, pr;
-    obs_delta.ToProto(&po);
-    ret_delta.ToProto(&pr);
-    const std::vector<std::string> all =
-        group_->AllGather(PackStrings({po.SerializeAsString(), pr.SerializeAsString()}));
-    RunningMeanStd ret_stats = ret_before;
-    for (size_t r = 0; r < all.size(); ++r) {
-      const std::string ctx = "learner group: rank " + std::to_string(r) + "'s statistics";
-      const std::vector<std::string> two = UnpackStrings(all[r], ctx);
-      if (two.size() != 2 || !po.ParseFromString(two[0]) || !pr.ParseFromString(two[1])) {
-        throw ConfigError(ctx + ": malformed");
-      }
-      AddObsStats(RunningMeanStd::FromProto(po, obs_dim, ctx + ".obs"));
-      ret_stats.Merge(RunningMeanStd::FromProto(pr, 1, ctx + ".returns"));
-    }
-    reward_scaler_.return_stats() = ret_stats;
-  }
-  st.num_samples = n;
-  st.group_samples = group_total;
-  st.lagged_samples = lagged;
+  if (group_ != nullptr) MergeGroupStats(obs_delta, ret_delta, ret_before);
+  st->lagged_samples = lagged;
   if (lagged > 0) {
-    st.vtrace_ratio_mean = static_cast<float>(sum_ratio / lagged);
-    st.vtrace_rho_clipped = static_cast<float>(rho_clipped) / lagged;
+    st->vtrace_ratio_mean = static_cast<float>(sum_ratio / lagged);
+    st->vtrace_rho_clipped = static_cast<float>(rho_clipped) / lagged;
   }
-  st.mean_reward = static_cast<float>(sum_r / n);
-  st.mean_scaled_reward = static_cast<float>(sum_sr / n);
-  st.mean_advantage = adv_.mean();
-  st.mean_return = ret_.mean();
-  {
-    const double var_ret = (ret_.array() - ret_.mean()).square().mean();
-    const VectorXf resid = ret_ - old_value_;
-    const double var_res = (resid.array() - resid.mean()).square().mean();
-    st.explained_variance = var_ret > 0 ? static_cast<float>(1.0 - var_res / var_ret) : 0.0f;
-  }
+  st->mean_reward = static_cast<float>(sum_r / n);
+  st->mean_scaled_reward = static_cast<float>(sum_sr / n);
+  st->mean_advantage = adv_.mean();
+  st->mean_return = ret_.mean();
+  const double var_ret = (ret_.array() - ret_.mean()).square().mean();
+  const VectorXf resid = ret_ - old_value_;
+  const double var_res = (resid.array() - resid.mean()).square().mean();
+  st->explained_variance = var_ret > 0 ? static_cast<float>(1.0 - var_res / var_ret) : 0.0f;
+}
 
+void PpoLearner::MergeGroupStats(const RunningMeanStd& obs_delta, const RunningMeanStd& ret_delta,
+                                 const RunningMeanStd& ret_before) {
+  const int obs_dim = model_.obs_dim();
+  proto::RunningStats po, pr;
+  obs_delta.ToProto(&po);
+  ret_delta.ToProto(&pr);
+  const std::vector<std::string> all =
+      group_->AllGather(PackStrings({po.SerializeAsString(), pr.SerializeAsString()}));
+  RunningMeanStd ret_stats = ret_before;
+  for (size_t r = 0; r < all.size(); ++r) {
+    const std::string ctx = "learner group: rank " + std::to_string(r) + "'s statistics";
+    const std::vector<std::string> two = UnpackStrings(all[r], ctx);
+    if (two.size() != 2 || !po.ParseFromString(two[0]) || !pr.ParseFromString(two[1])) {
+      throw ConfigError(ctx + ": malformed");
+    }
+    AddObsStats(RunningMeanStd::FromProto(po, obs_dim, ctx + ".obs"));
+    ret_stats.Merge(RunningMeanStd::FromProto(pr, 1, ctx + ".returns"));
+  }
+  reward_scaler_.return_stats() = ret_stats;
+}
+
+void PpoLearner::RunEpochs(int n, const std::vector<int>& group_n, UpdateStats* st) {
+  const int min_n = *std::min_element(group_n.begin(), group_n.end());
   const int num_mb = std::max(1, std::min(ppo_.num_minibatches, min_n));
   // Minibatch m of a group: every member's m-th part; the means are over their total size.
   auto part = [num_mb](int m, int size) {
@@ -302,37 +304,14 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
     for (int m = 0; m < num_mb; ++m) {
       const int begin = static_cast<int>(static_cast<int64_t>(m) * n / num_mb);
       const int end = static_cast<int>(static_cast<int64_t>(m + 1) * n / num_mb);
-      const int b = end - begin;
-      int mean_over = b;
+      int mean_over = end - begin;
       if (group_ != nullptr) {
         mean_over = 0;
         for (int nr : group_n) mean_over += part(m, nr);
       }
-      PpoLossTerms lt;
       float gn;
-      if (ppo_.threads > 1) {
-        // Parts of the minibatch on threads of their own (at least kMinShardSamples each).
-        lt = ColumnLoss(begin, b, std::max(1, std::min(ppo_.threads, b / kMinShardSamples)), params,
-                        mean_over);
-        if (group_ != nullptr) {
-          SumShards();
-          ReduceOverGroup(&lt);
-          gn = SerialStep(&grad_);
-        } else {
-          gn = ShardedStep();
-        }
-      } else {
-        ResizeShard(&mb_, b);
-        GatherColumns(&mb_, begin, 0, b);
-        if (ppo_.normalize_advantages && b > 1) NormalizeAdvantages(&mb_.adv);
-        grad_.setZero();
-        lt = PpoLoss(model_, params, ppo_, mb_.obs, mb_.act, mb_.logp, mb_.value, mb_.adv, mb_.ret,
-                     &ws_, grad_.data(), mean_over);
-        if (group_ != nullptr) ReduceOverGroup(&lt);
-        gn = SerialStep(&grad_);
-      }
+      const PpoLossTerms lt = MinibatchStep(begin, end - begin, mean_over, params, &gn);
       params = model_.params().data();
-
       acc_pg += lt.policy_loss;
       acc_vf += lt.value_loss;
       acc_ent += lt.entropy;
@@ -342,13 +321,56 @@ UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
       ++steps;
     }
   }
-  st.num_minibatch_steps = steps;
-  st.policy_loss = static_cast<float>(acc_pg / steps);
-  st.value_loss = static_cast<float>(acc_vf / steps);
-  st.entropy = static_cast<float>(acc_ent / steps);
-  st.approx_kl = static_cast<float>(acc_kl / steps);
-  st.clip_fraction = static_cast<float>(acc_cf / steps);
-  st.grad_norm = static_cast<float>(acc_gn / steps);
+  st->num_minibatch_steps = steps;
+  st->policy_loss = static_cast<float>(acc_pg / steps);
+  st->value_loss = static_cast<float>(acc_vf / steps);
+  st->entropy = static_cast<float>(acc_ent / steps);
+  st->approx_kl = static_cast<float>(acc_kl / steps);
+  st->clip_fraction = static_cast<float>(acc_cf / steps);
+  st->grad_norm = static_cast<float>(acc_gn / steps);
+}
+
+PpoLossTerms PpoLearner::MinibatchStep(int begin, int b, int mean_over, const float* params,
+                                       float* grad_norm) {
+  PpoLossTerms lt;
+  if (ppo_.threads > 1) {
+    // Parts of the minibatch on threads of their own (at least kMinShardSamples each).
+    lt = ColumnLoss(begin, b, std::max(1, std::min(ppo_.threads, b / kMinShardSamples)), params,
+                    mean_over);
+    if (group_ != nullptr) {
+      SumShards();
+      ReduceOverGroup(&lt);
+      *grad_norm = SerialStep(&grad_);
+    } else {
+      *grad_norm = ShardedStep();
+    }
+    return lt;
+  }
+  ResizeShard(&mb_, b);
+  GatherColumns(&mb_, begin, 0, b);
+  if (ppo_.normalize_advantages && b > 1) NormalizeAdvantages(&mb_.adv);
+  grad_.setZero();
+  lt = PpoLoss(model_, params, ppo_, mb_.obs, mb_.act, mb_.logp, mb_.value, mb_.adv, mb_.ret, &ws_,
+               grad_.data(), mean_over);
+  if (group_ != nullptr) ReduceOverGroup(&lt);
+  *grad_norm = SerialStep(&grad_);
+  return lt;
+}
+
+UpdateStats PpoLearner::Update(const std::vector<Rollout>& rollouts) {
+  const std::vector<int> group_n = CheckBatch(rollouts);
+  const int n = group_n[group_ != nullptr ? group_->rank() : 0];
+  UpdateStats st;
+  int min_n = n, group_total = 0;
+  for (int nr : group_n) {
+    min_n = std::min(min_n, nr);
+    group_total += nr;
+  }
+  if (min_n == 0) return st;
+  st.num_samples = n;
+  st.group_samples = group_total;
+  AssembleBatch(rollouts, n, &st);
+  RunEpochs(n, group_n, &st);
   st.log_std_mean = model_.params().segment(model_.log_std_offset(), model_.act_dim()).mean();
   ++num_updates_;
   num_samples_ += n;

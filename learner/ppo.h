@@ -158,6 +158,20 @@ class PpoLearner {
   PpoLossWorkspace ws_;
   std::vector<float> scaled_rewards_, seg_adv_, seg_ret_, seg_rho_, seg_c_;
 
+  // Update's steps. Each rollout is valid and fits the model (ConfigError otherwise; a group
+  // agrees first, every member refusing together); returns every member's sample count by rank.
+  std::vector<int> CheckBatch(const std::vector<Rollout>& rollouts) const;
+  // The flattened batch: observation statistics, scaled rewards, GAE (V-trace for lagged
+  // segments), the old log-probs and values; the batch's figures into st.
+  void AssembleBatch(const std::vector<Rollout>& rollouts, int n, UpdateStats* st);
+  // A group's observation and return statistics merged in rank order.
+  void MergeGroupStats(const RunningMeanStd& obs_delta, const RunningMeanStd& ret_delta,
+                       const RunningMeanStd& ret_before);
+  // The epochs over shuffled minibatches; their mean losses into st.
+  void RunEpochs(int n, const std::vector<int>& group_n, UpdateStats* st);
+  // One minibatch (columns perm_[begin, begin + b)): loss, gradient, Adam step.
+  PpoLossTerms MinibatchStep(int begin, int b, int mean_over, const float* params,
+                             float* grad_norm);
   void ResizeShard(Shard* sh, int bs) const;
   void GatherColumns(Shard* sh, int lo, int k0, int k1) const;  // columns [k0, k1) of perm_[lo..]
   void NormalizeAdvantages(VectorXf* adv) const;  // (A - mean) / (std + eps) over the vector
