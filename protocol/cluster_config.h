@@ -71,7 +71,7 @@ struct ClusterConfig {
   // arrive up to simulated_lag versions old (plus the natural lag). For measuring off-policy
   // corrections (ppo.vtrace) on a machine too small to lag by itself. 0: off.
   int simulated_lag = 0;
-  // Several learners (ours, issue 20; docs/cluster.md "Several learners"): `learners` processes
+  // Several learners (ours, issue 20; docs/scaling.md "Several learners"): `learners` processes
   // (`perch learner --rank 0..learners-1`), each with its own actors and batch, sum every
   // minibatch's gradient over the group (DD-PPO), so they hold the same weights. Rank 0 binds
   // group_address, the others connect to it. An operation that has not completed on every member

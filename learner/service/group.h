@@ -1,4 +1,4 @@
-// A group of learners over ZeroMQ (ours, issue 20; docs/cluster.md "Several learners"): rank 0
+// A group of learners over ZeroMQ (ours, issue 20; docs/scaling.md "Several learners"): rank 0
 // binds a ROUTER at the group address, the others connect a DEALER to it. Every collective is a
 // star: the members send their part to rank 0, which combines them in rank order and sends the
 // same bytes back to all, so sums have the same bits everywhere. The group is for a handful of
