@@ -281,6 +281,159 @@ float SubtaskPolicies::RunningValue(int id, const HumanoidChairEnv& env) {
 
 // ---- the scripted chain ------------------------------------------------------------------------
 
+namespace {
+
+// What the chain's rules did over all episodes: turns and sits begun, and (planned hand-over)
+// where the sits began relative to the sit clip's start (chair frame) [m], [deg] and the
+// predicted hand-over error when each turn began [m].
+struct ChainTally {
+  int left_turns = 0, right_turns = 0, sits = 0;
+  std::vector<double> start_along, start_across, start_yaw_deg, handover_err;
+};
+
+// The scripted chain's fixed switching rules over one episode (docs/subtasks.md "The scripted
+// chain"): walk to a point in front of the seat (or, planned, where the turn will end at the
+// sit's start), turn to the side that faces away from the chair, sit.
+class ChainRules {
+ public:
+  ChainRules(const ChainOptions& o, const MetaPlan& plan, const PlanRule& rule, double chair_yaw,
+             double dt, ChainTally* tally)
+      : o_(o),
+        plan_(plan),
+        rule_(rule),
+        chair_yaw_(chair_yaw),
+        facing_(std::cos(chair_yaw), std::sin(chair_yaw)),
+        sit_yaw_(o.plan ? plan.sit_start.yaw : chair_yaw),
+        dt_(dt),
+        tally_(tally) {}
+
+  // After the episode's Reset: walk towards the point in front of the seat.
+  void Begin(HumanoidChairEnv& env) {
+    target_ = env.SeatTargetWorld().head<2>() + o_.approach_dist_m * facing_;
+    env.SetWalkTarget(target_);
+    phase_ = kWalk;
+    phase_start_ = 0;
+    turn_taken_.clear();
+    sit_from_ = nullptr;
+    plan_left_ = o_.side == "left"    ? true
+                 : o_.side == "right" ? false
+                                      : AngleDiff(plan_.sit_start.yaw, env.RootRpy().z()) >= 0;
+  }
+
+  // Before control step k of episode e: switches the subtask when the rules say so. False when
+  // the episode ends here (at the switch to sit, with stop_at_sit).
+  bool Decide(HumanoidChairEnv& env, int k, int e) {
+    const bool decide = k % o_.decision_period == 0;
+    const bool walk_timeout = (k - phase_start_) * dt_ >= o_.max_walk_s;
+    if (phase_ == kWalk && o_.plan) {
+      if (decide) PlannedWalk(env, k, walk_timeout);
+    } else if (phase_ == kWalk) {
+      const bool reached = (env.BodyXyz().head<2>() - target_).norm() < o_.reach_m;
+      if (decide && (reached || walk_timeout)) {
+        // Turn towards the chair's facing direction the short way round.
+        const double err = AngleDiff(chair_yaw_, env.RootRpy().z());
+        phase_ = o_.side == "left"    ? kLeftTurn
+                 : o_.side == "right" ? kRightTurn
+                 : err >= 0           ? kLeftTurn
+                                      : kRightTurn;
+        (phase_ == kLeftTurn ? tally_->left_turns : tally_->right_turns) += 1;
+        turn_taken_ = SubtaskName(phase_);
+        phase_start_ = k;
+      }
+    } else if (phase_ != kSit && decide && TurnDone(env, k)) {
+      BeginSit(env, k, e);
+      if (o_.stop_at_sit) return false;
+    }
+    return true;
+  }
+
+  int phase() const { return phase_; }
+  const std::string& turn_taken() const { return turn_taken_; }
+  const Json& sit_from() const { return sit_from_; }
+
+ private:
+  // The planned walk: the walk target from the plan, and the hand-over to the planned turn.
+  void PlannedWalk(HumanoidChairEnv& env, int k, bool walk_timeout) {
+    const PlanarPose root{env.humanoid_state().root_pos.head<2>(), env.RootRpy().z()};
+    const std::vector<double> features =
+        o_.planner.regress_start_state ? TurnStartFeatures(env) : std::vector<double>();
+    const PlanView v = PlanStep(root, plan_.sit_start, plan_.turns[plan_left_ ? 0 : 1], plan_left_,
+                                rule_, o_.planner.regress_start_state ? &features : nullptr);
+    env.SetWalkTarget(v.walk_target);
+    const bool now = HandOverNow(v, env.humanoid_state().root_lin_vel.head<2>(),
+                                 o_.decision_period * dt_, plan_.sit_start.xy, rule_);
+    if (!now && !walk_timeout) return;
+    phase_ = plan_left_ ? kLeftTurn : kRightTurn;
+    turn_taken_ = SubtaskName(phase_);
+    (plan_left_ ? tally_->left_turns : tally_->right_turns) += 1;
+    phase_start_ = k;
+    tally_->handover_err.push_back(v.error_m);
+  }
+
+  // Turn -> sit: after turn_s, or once the heading is within sit_yaw_deg after turn_min_s.
+  bool TurnDone(const HumanoidChairEnv& env, int k) const {
+    const double t = (k - phase_start_) * dt_;
+    return t >= o_.turn_s ||
+           (o_.sit_yaw_deg > 0 && t >= o_.turn_min_s &&
+            SitNow(env.RootRpy().z(), env.humanoid_state().root_ang_vel.z(), sit_yaw_,
+                   o_.sit_yaw_deg * M_PI / 180.0, o_.decision_period * dt_));
+  }
+
+  void BeginSit(const HumanoidChairEnv& env, int k, int e) {
+    phase_ = kSit;
+    ++tally_->sits;
+    phase_start_ = k;
+    if (o_.plan) {
+      const Eigen::Vector2d rel =
+          Eigen::Rotation2Dd(-chair_yaw_) *
+          Eigen::Vector2d(env.humanoid_state().root_pos.head<2>() - plan_.sit_start.xy);
+      tally_->start_along.push_back(rel.x());
+      tally_->start_across.push_back(rel.y());
+      tally_->start_yaw_deg.push_back(AngleDiff(env.RootRpy().z(), plan_.sit_start.yaw) * 180.0 /
+                                      M_PI);
+      sit_from_ = Json::array({rel.x(), rel.y(), tally_->start_yaw_deg.back()});
+    }
+    if (o_.sit_starts != nullptr) {
+      o_.sit_starts->push_back(CaptureState(env));
+      o_.sit_starts->back().set_episode(static_cast<uint64_t>(e));
+    }
+  }
+
+  const ChainOptions& o_;
+  const MetaPlan& plan_;
+  const PlanRule& rule_;
+  double chair_yaw_;
+  Eigen::Vector2d facing_;
+  double sit_yaw_;
+  double dt_;
+  ChainTally* tally_;
+  Eigen::Vector2d target_ = Eigen::Vector2d::Zero();
+  int phase_ = kWalk, phase_start_ = 0;
+  bool plan_left_ = true;
+  std::string turn_taken_;
+  Json sit_from_ = nullptr;  // where this episode's sit began (plan only)
+};
+
+// The planned hand-over's figures: the sit's start, the turns' calibration, where the sits began.
+Json PlanSummary(const MetaPlan& plan, const ChainTally& t, const PlannerConfig& planner) {
+  return Json{{"sit_start",
+               {{"x_m", plan.sit_start.xy.x()},
+                {"y_m", plan.sit_start.xy.y()},
+                {"yaw_deg", plan.sit_start.yaw * 180.0 / M_PI}}},
+              {"turn_left_calibration", plan.turns[0].ToJson()},
+              {"turn_right_calibration", plan.turns[1].ToJson()},
+              {"handover_pred_err_m_mean", MeanOf(t.handover_err)},
+              {"sit_start_along_m_mean", MeanOf(t.start_along)},
+              {"sit_start_along_m_std", StdOf(t.start_along)},
+              {"sit_start_across_m_mean", MeanOf(t.start_across)},
+              {"sit_start_across_m_std", StdOf(t.start_across)},
+              {"sit_start_yaw_deg_mean", MeanOf(t.start_yaw_deg)},
+              {"sit_start_yaw_deg_std", StdOf(t.start_yaw_deg)},
+              {"planner", planner.ToJson()}};
+}
+
+}  // namespace
+
 Json EvaluateChain(const TaskEnvConfig& config,
                    const std::array<proto::ModelWeights, kNumSubtasks>& models,
                    const std::array<std::string, kNumSubtasks>& paths,
@@ -295,8 +448,6 @@ Json EvaluateChain(const TaskEnvConfig& config,
   const double dt = env->spec().control_dt;
   const int max_steps = env->spec().max_episode_steps;
   const int need = static_cast<int>(std::ceil(task.config().success_contact_s / dt - 1e-9));
-  const double chair_yaw = config.env.chair_placement.yaw;
-  const Eigen::Vector2d facing(std::cos(chair_yaw), std::sin(chair_yaw));
   std::vector<float> obs(env->spec().obs_dim), action(21);
   if (o.decision_period < 1) throw ConfigError("chain: decision period must be >= 1");
   // The planned hand-over: where the sit starts, how each turn moves (hierarchy/chain_plan.h).
@@ -309,95 +460,30 @@ Json EvaluateChain(const TaskEnvConfig& config,
     plan = MeasurePlan(*env, policies, saved_configs[kSit], paths[kSit], pc);
     rule = MakePlanRule(o.planner, o.sit_yaw_deg);
   }
-  const PlanarPose& sit_start = plan.sit_start;
-  const std::array<TurnCalibration, 2>& calibration = plan.turns;
-  const double sit_yaw = o.plan ? sit_start.yaw : chair_yaw;
-  int successes = 0, falls = 0, left_turns = 0, right_turns = 0, sits = 0;
+  ChainTally tally;
+  ChainRules rules(o, plan, rule, config.env.chair_placement.yaw, dt, &tally);
+  int successes = 0, falls = 0;
   std::array<int, kNumSubtasks> falls_in{};  // by the subtask acting when the episode ended
   // Per episode: spawn azimuth [deg], the turn taken, the subtask it fell in ("" none), success.
   Json per_episode = Json::array();
   std::vector<double> min_dists, sit_times;
-  // Where the sits began relative to where the sit's clip starts (chair frame) [m], [deg]; the
-  // predicted hand-over error when the turn began [m].
-  std::vector<double> start_along, start_across, start_yaw_deg, handover_err;
   for (int e = 0; e < o.episodes; ++e) {
     const uint64_t episode_seed = o.seed * 1000003ULL + static_cast<uint64_t>(e);
     env->Seed(2 * episode_seed);
     Rng act_rng(2 * episode_seed + 1);
     env->Reset(obs.data());
-    const Eigen::Vector2d target = env->SeatTargetWorld().head<2>() + o.approach_dist_m * facing;
-    env->SetWalkTarget(target);
-    int phase = kWalk, phase_start = 0, run = 0, begun = -1;
-    std::string turn_taken;
-    Json sit_from = nullptr;  // where this episode's sit began (plan only)
-    const bool plan_left = o.side == "left"    ? true
-                           : o.side == "right" ? false
-                                               : AngleDiff(sit_start.yaw, env->RootRpy().z()) >= 0;
+    rules.Begin(*env);
+    int run = 0, begun = -1;
     if (o.recorder != nullptr) {
       RecordingExtras x;
-      x.active_subtask = phase;
+      x.active_subtask = rules.phase();
       o.recorder->Begin(*env, e, 2 * episode_seed, x);
     }
     double min_dist = env->PelvisSeatDistance();
     bool success = false, fell = false;
     for (int k = 0; k < max_steps; ++k) {
-      // Fixed switching rules (docs/subtasks.md "The scripted chain").
-      const bool decide = k % o.decision_period == 0;
-      const bool walk_timeout = (k - phase_start) * dt >= o.max_walk_s;
-      if (phase == kWalk && o.plan) {
-        if (decide) {
-          const PlanarPose root{env->humanoid_state().root_pos.head<2>(), env->RootRpy().z()};
-          const std::vector<double> features =
-              o.planner.regress_start_state ? TurnStartFeatures(*env) : std::vector<double>();
-          const PlanView v = PlanStep(root, sit_start, calibration[plan_left ? 0 : 1], plan_left,
-                                      rule, o.planner.regress_start_state ? &features : nullptr);
-          env->SetWalkTarget(v.walk_target);
-          const bool now = HandOverNow(v, env->humanoid_state().root_lin_vel.head<2>(),
-                                       o.decision_period * dt, sit_start.xy, rule);
-          if (now || walk_timeout) {
-            phase = plan_left ? kLeftTurn : kRightTurn;
-            turn_taken = SubtaskName(phase);
-            (plan_left ? left_turns : right_turns) += 1;
-            phase_start = k;
-            handover_err.push_back(v.error_m);
-          }
-        }
-      } else if (phase == kWalk) {
-        const bool reached = (env->BodyXyz().head<2>() - target).norm() < o.reach_m;
-        if (decide && (reached || walk_timeout)) {
-          // Turn towards the chair's facing direction the short way round.
-          const double err = AngleDiff(chair_yaw, env->RootRpy().z());
-          phase = o.side == "left"    ? kLeftTurn
-                  : o.side == "right" ? kRightTurn
-                  : err >= 0          ? kLeftTurn
-                                      : kRightTurn;
-          (phase == kLeftTurn ? left_turns : right_turns) += 1;
-          turn_taken = SubtaskName(phase);
-          phase_start = k;
-        }
-      } else if (phase != kSit && decide &&
-                 ((k - phase_start) * dt >= o.turn_s ||
-                  (o.sit_yaw_deg > 0 && (k - phase_start) * dt >= o.turn_min_s &&
-                   SitNow(env->RootRpy().z(), env->humanoid_state().root_ang_vel.z(), sit_yaw,
-                          o.sit_yaw_deg * M_PI / 180.0, o.decision_period * dt)))) {
-        phase = kSit;
-        ++sits;
-        phase_start = k;
-        if (o.plan) {
-          const Eigen::Vector2d rel =
-              Eigen::Rotation2Dd(-chair_yaw) *
-              Eigen::Vector2d(env->humanoid_state().root_pos.head<2>() - sit_start.xy);
-          start_along.push_back(rel.x());
-          start_across.push_back(rel.y());
-          start_yaw_deg.push_back(AngleDiff(env->RootRpy().z(), sit_start.yaw) * 180.0 / M_PI);
-          sit_from = Json::array({rel.x(), rel.y(), start_yaw_deg.back()});
-        }
-        if (o.sit_starts != nullptr) {
-          o.sit_starts->push_back(CaptureState(*env));
-          o.sit_starts->back().set_episode(static_cast<uint64_t>(e));
-        }
-        if (o.stop_at_sit) break;
-      }
+      if (!rules.Decide(*env, k, e)) break;
+      const int phase = rules.phase();
       task.set_active(phase);
       if (phase != begun) {
         policies.Begin(phase, *env);
@@ -426,33 +512,16 @@ Json EvaluateChain(const TaskEnvConfig& config,
       }
     }
     successes += success;
-    per_episode.push_back({task.spawn_theta() * 180.0 / M_PI, turn_taken,
-                           fell ? SubtaskName(phase) : "", success, sit_from});
+    per_episode.push_back({task.spawn_theta() * 180.0 / M_PI, rules.turn_taken(),
+                           fell ? SubtaskName(rules.phase()) : "", success, rules.sit_from()});
     if (o.recorder != nullptr) o.recorder->End(success, fell);
     falls += fell;
     min_dists.push_back(min_dist);
   }
   const double n = o.episodes;
   const auto ci = WilsonInterval95(successes, o.episodes);
-  Json plan_json = nullptr;
-  if (o.plan) {
-    plan_json = Json{{"sit_start",
-                      {{"x_m", sit_start.xy.x()},
-                       {"y_m", sit_start.xy.y()},
-                       {"yaw_deg", sit_start.yaw * 180.0 / M_PI}}},
-                     {"turn_left_calibration", calibration[0].ToJson()},
-                     {"turn_right_calibration", calibration[1].ToJson()},
-                     {"handover_pred_err_m_mean", MeanOf(handover_err)},
-                     {"sit_start_along_m_mean", MeanOf(start_along)},
-                     {"sit_start_along_m_std", StdOf(start_along)},
-                     {"sit_start_across_m_mean", MeanOf(start_across)},
-                     {"sit_start_across_m_std", StdOf(start_across)},
-                     {"sit_start_yaw_deg_mean", MeanOf(start_yaw_deg)},
-                     {"sit_start_yaw_deg_std", StdOf(start_yaw_deg)},
-                     {"planner", o.planner.ToJson()}};
-  }
   return Json{{"task", "chain"},
-              {"plan", plan_json},
+              {"plan", o.plan ? PlanSummary(plan, tally, o.planner) : Json(nullptr)},
               {"decision_period", o.decision_period},
               {"zone", config.env.spawn.zone},
               {"chair", config.env.chair},
@@ -469,9 +538,9 @@ Json EvaluateChain(const TaskEnvConfig& config,
                 {"turn_left", falls_in[kLeftTurn]},
                 {"turn_right", falls_in[kRightTurn]},
                 {"sit", falls_in[kSit]}}},
-              {"left_turns", left_turns},
-              {"right_turns", right_turns},
-              {"reached_sit", sits},
+              {"left_turns", tally.left_turns},
+              {"right_turns", tally.right_turns},
+              {"reached_sit", tally.sits},
               {"time_to_success_s_mean", MeanOf(sit_times)},
               {"episodes_detail", per_episode},
               {"models",
