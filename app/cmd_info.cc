@@ -54,7 +54,7 @@ void RegisterInfoCommands(CLI::App& root, CLI::App& /*bench*/) {
                "validate and fill in every default (as a run records it)");
   cc->add_option(
       "--fields", c->fields,
-      "print a section's fields instead (env, ppo, cluster, a task's section such as walk "
+      "print a section's fields instead (env, ppo, cluster, policy, a task's section such as walk "
       "or sit_chair, or all): name, default, "
       "range, doc");
   cc->add_flag("--json", c->json, "--fields: as JSON");

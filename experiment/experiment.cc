@@ -134,7 +134,9 @@ std::vector<FrozenPolicyData> ExperimentFrozenPolicies(const ExperimentConfig& c
 Json ConfigFieldTables() {
   Json t{{"env", EnvConfigFields().Describe()},
          {"ppo", PpoConfigFields().Describe()},
-         {"cluster", ClusterConfigFields().Describe()}};
+         {"cluster", ClusterConfigFields().Describe()},
+         // The defaults of a subtask's policy; a meta's starts from PolicyConfig::Meta().
+         {"policy", PolicyConfigFields().Describe()}};
   // Each task's own section (env.<task> in a config).
   for (const std::string& name : TaskNames()) {
     const TaskDef& d = GetTask(name, "--fields");
@@ -168,7 +170,7 @@ std::string ConfigFieldsText(const std::string& section, bool json) {
   } else if (all.contains(section)) {
     pick[section] = all[section];
   } else {
-    std::string known = "env, ppo, cluster";
+    std::string known = "env, ppo, cluster, policy";
     for (const std::string& name : TaskNames()) {
       if (all.contains(name)) known += ", " + name;
     }

@@ -16,23 +16,41 @@ Activation ParseActivation(const std::string& name, const std::string& ctx) {
   throw ConfigError(ctx + ": unknown activation '" + name + "' (expected tanh or relu)");
 }
 
-Json ToJson(const MlpConfig& c) {
-  return Json{{"hidden", c.hidden}, {"activation", ActivationName(c.activation)}};
+const FieldTable<MlpConfig>& MlpConfigFields() {
+  using C = MlpConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("hidden", &C::hidden, "hidden layer widths",
+               FieldRule<std::vector<int>>{[](const std::vector<int>& v) {
+                                             for (int h : v) {
+                                               if (h <= 0) return false;
+                                             }
+                                             return true;
+                                           },
+                                           "widths must be positive",
+                                           [](const std::vector<int>& v) {
+                                             for (int h : v) {
+                                               if (h <= 0)
+                                                 return "widths must be positive, got " +
+                                                        std::to_string(h);
+                                             }
+                                             return std::string();
+                                           }})
+          .CustomAlways(
+              "activation", "tanh or relu",
+              [](const Json& j, C& c, const std::string& ctx) {
+                std::string act = ActivationName(c.activation);
+                GetOptional(j, "activation", act, ctx);
+                c.activation = ParseActivation(act, ctx + ".activation");
+              },
+              [](const C& c, Json& j) { j["activation"] = ActivationName(c.activation); });
+  return t;
 }
 
+Json ToJson(const MlpConfig& c) { return MlpConfigFields().Write(c); }
+
 MlpConfig MlpConfigFromJson(const Json& j, const std::string& ctx) {
-  if (!j.is_object()) throw ConfigError(ctx + ": expected an object, got " + j.dump());
-  CheckKnownKeys(j, {"hidden", "activation"}, ctx);
-  MlpConfig c;
-  GetOptional(j, "hidden", c.hidden, ctx);
-  for (int h : c.hidden) {
-    if (h <= 0)
-      throw ConfigError(ctx + ".hidden: widths must be positive, got " + std::to_string(h));
-  }
-  std::string act = ActivationName(c.activation);
-  GetOptional(j, "activation", act, ctx);
-  c.activation = ParseActivation(act, ctx + ".activation");
-  return c;
+  return MlpConfigFields().Read(j, ctx);
 }
 
 Mlp::Mlp(int in_dim, const MlpConfig& config, int out_dim) : activation_(config.activation) {

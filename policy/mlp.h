@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "common/field_table.h"
 #include "common/json_util.h"
 #include "common/rng.h"
 
@@ -27,6 +28,7 @@ struct MlpConfig {
 };
 Json ToJson(const MlpConfig& c);
 MlpConfig MlpConfigFromJson(const Json& j, const std::string& ctx);
+const FieldTable<MlpConfig>& MlpConfigFields();  // each field written once (common/field_table.h)
 
 // Activations of one batched forward pass, kept for the backward pass. Reused across calls:
 // buffers are resized only when the batch size changes.

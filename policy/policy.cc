@@ -48,56 +48,53 @@ PolicyConfig PolicyConfig::Meta(int obs_dim) {
   return c;
 }
 
-Json ToJson(const PolicyConfig& c) {
-  return Json{{"kind", KindName(c.kind)},
-              {"obs_dim", c.obs_dim},
-              {"act_dim", c.act_dim},
-              {"num_choices", c.num_choices},
-              {"target_choice", c.target_choice},
-              {"policy_net", ToJson(c.policy_net)},
-              {"value_net", ToJson(c.value_net)},
-              {"std_mode", StdModeName(c.std_mode)},
-              {"init_log_std", c.init_log_std},
-              {"hidden_gain", c.hidden_gain},
-              {"policy_out_gain", c.policy_out_gain},
-              {"value_out_gain", c.value_out_gain}};
+const FieldTable<PolicyConfig>& PolicyConfigFields() {
+  using C = PolicyConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          // First: a meta policy starts from PolicyConfig::Meta()'s defaults.
+          .CustomAlways(
+              "kind", "gaussian (a subtask) or meta",
+              [](const Json& j, C& c, const std::string& ctx) {
+                std::string kind = KindName(c.kind);
+                GetOptional(j, "kind", kind, ctx);
+                if (ParseKind(kind, ctx + ".kind") == PolicyKind::kMeta) c = PolicyConfig::Meta();
+              },
+              [](const C& c, Json& j) { j["kind"] = KindName(c.kind); })
+          .Add("obs_dim", &C::obs_dim, "observation size (set from the env)", Positive<int>())
+          .Add("act_dim", &C::act_dim, "action size (meta: the 2-d walk target)", Positive<int>())
+          .Add("num_choices", &C::num_choices, "meta: the switch's classes")
+          .Add("target_choice", &C::target_choice, "meta: the class the target head drives")
+          .Nested("policy_net", &C::policy_net, MlpConfigFields(), "the policy's hidden layers")
+          .Nested("value_net", &C::value_net, MlpConfigFields(), "the critic's hidden layers")
+          .CustomAlways(
+              "std_mode", "trained (authors) or fixed (the paper's fixed covariance)",
+              [](const Json& j, C& c, const std::string& ctx) {
+                std::string std_mode = StdModeName(c.std_mode);
+                GetOptional(j, "std_mode", std_mode, ctx);
+                c.std_mode = ParseStdMode(std_mode, ctx + ".std_mode");
+              },
+              [](const C& c, Json& j) { j["std_mode"] = StdModeName(c.std_mode); })
+          .Add("init_log_std", &C::init_log_std, "log sigma at start")
+          .Add("hidden_gain", &C::hidden_gain, "orthogonal init gain, hidden layers")
+          .Add("policy_out_gain", &C::policy_out_gain, "orthogonal init gain, mean and logits")
+          .Add("value_out_gain", &C::value_out_gain, "orthogonal init gain, value")
+          .Rule([](const C& c, const std::string& ctx) {
+            if (c.kind != PolicyKind::kMeta) return std::string();
+            // 1: the walk-only pre-training (notes 4.7), whose switch has one class.
+            if (c.num_choices < 1) return ctx + ".num_choices: must be >= 1";
+            if (c.target_choice < 0 || c.target_choice >= c.num_choices) {
+              return ctx + ".target_choice: must be in [0, num_choices)";
+            }
+            return std::string();
+          });
+  return t;
 }
 
+Json ToJson(const PolicyConfig& c) { return PolicyConfigFields().Write(c); }
+
 PolicyConfig PolicyConfigFromJson(const Json& j, const std::string& ctx) {
-  if (!j.is_object()) throw ConfigError(ctx + ": expected an object, got " + j.dump());
-  CheckKnownKeys(
-      j,
-      {"kind", "obs_dim", "act_dim", "num_choices", "target_choice", "policy_net", "value_net",
-       "std_mode", "init_log_std", "hidden_gain", "policy_out_gain", "value_out_gain"},
-      ctx);
-  PolicyConfig c;
-  std::string kind = KindName(c.kind);
-  GetOptional(j, "kind", kind, ctx);
-  if (ParseKind(kind, ctx + ".kind") == PolicyKind::kMeta) c = PolicyConfig::Meta();
-  GetOptional(j, "obs_dim", c.obs_dim, ctx);
-  GetOptional(j, "act_dim", c.act_dim, ctx);
-  GetOptional(j, "num_choices", c.num_choices, ctx);
-  GetOptional(j, "target_choice", c.target_choice, ctx);
-  if (j.contains("policy_net"))
-    c.policy_net = MlpConfigFromJson(j["policy_net"], ctx + ".policy_net");
-  if (j.contains("value_net")) c.value_net = MlpConfigFromJson(j["value_net"], ctx + ".value_net");
-  std::string std_mode = StdModeName(c.std_mode);
-  GetOptional(j, "std_mode", std_mode, ctx);
-  c.std_mode = ParseStdMode(std_mode, ctx + ".std_mode");
-  GetOptional(j, "init_log_std", c.init_log_std, ctx);
-  GetOptional(j, "hidden_gain", c.hidden_gain, ctx);
-  GetOptional(j, "policy_out_gain", c.policy_out_gain, ctx);
-  GetOptional(j, "value_out_gain", c.value_out_gain, ctx);
-  if (c.obs_dim <= 0) throw ConfigError(ctx + ".obs_dim: must be > 0");
-  if (c.act_dim <= 0) throw ConfigError(ctx + ".act_dim: must be > 0");
-  if (c.kind == PolicyKind::kMeta) {
-    // 1: the walk-only pre-training (notes 4.7), whose switch has one class.
-    if (c.num_choices < 1) throw ConfigError(ctx + ".num_choices: must be >= 1");
-    if (c.target_choice < 0 || c.target_choice >= c.num_choices) {
-      throw ConfigError(ctx + ".target_choice: must be in [0, num_choices)");
-    }
-  }
-  return c;
+  return PolicyConfigFields().Read(j, ctx);
 }
 
 ActorCritic::ActorCritic(const PolicyConfig& config, uint64_t seed) : config_(config) {

@@ -57,6 +57,7 @@ struct PolicyConfig {
 Json ToJson(const PolicyConfig& c);
 // Strict: unknown field / wrong type / bad value -> ConfigError naming ctx.field.
 PolicyConfig PolicyConfigFromJson(const Json& j, const std::string& ctx);
+const FieldTable<PolicyConfig>& PolicyConfigFields();  // each field written once
 
 // Per-sample results and caches of a batched evaluation (PPO update). Reused across minibatches.
 struct PolicyEvalCache {
