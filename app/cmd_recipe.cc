@@ -29,7 +29,8 @@ void RegisterRecipeCommands(CLI::App& root, CLI::App& /*bench*/) {
   run->add_option("--extend", f->extend,
                   "accept a training stage's larger budget (cluster.max_samples; learning rates "
                   "past the samples it trained may change too): it continues from its newest "
-                  "checkpoint, and the stages that read it are redone (files to DIR/superseded/)");
+                  "checkpoint, and the stages that read it are redone (files to DIR/superseded/); "
+                  "with its budget unchanged, a changed select: its checkpoint is chosen again");
   run->add_option("--set", f->options.sets,
                   "override a field of every stage's config: section.field=VALUE (repeatable)");
   run->add_option("--scale", f->options.scale,

@@ -27,9 +27,11 @@ bool ValidName(const std::string& s) {
 
 StageSelect SelectFromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(j, {"last_k", "episodes", "seed", "metric", "lower_is_better", "args"}, ctx);
+  CheckKnownKeys(
+      j, {"last_k", "milestones", "episodes", "seed", "metric", "lower_is_better", "args"}, ctx);
   StageSelect s;
   GetOptional(j, "last_k", s.last_k, ctx);
+  GetOptional(j, "milestones", s.milestones, ctx);
   GetOptional(j, "episodes", s.episodes, ctx);
   GetOptional(j, "seed", s.seed, ctx);
   GetOptional(j, "metric", s.metric, ctx);
@@ -37,16 +39,22 @@ StageSelect SelectFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "args", s.args, ctx);
   if (s.last_k < 0 || s.last_k > 50) throw ConfigError(ctx + ".last_k: must be in 0..50");
   if (s.episodes < 1) throw ConfigError(ctx + ".episodes: must be >= 1");
+  if (s.milestones && s.last_k < 1) {
+    throw ConfigError(ctx + ".milestones: needs last_k >= 1 (a selection by evaluation)");
+  }
   return s;
 }
 
 Json ToJson(const StageSelect& s) {
-  return Json{{"last_k", s.last_k},
-              {"episodes", s.episodes},
-              {"seed", s.seed},
-              {"metric", s.metric},
-              {"lower_is_better", s.lower_is_better},
-              {"args", s.args}};
+  Json j{{"last_k", s.last_k},
+         {"episodes", s.episodes},
+         {"seed", s.seed},
+         {"metric", s.metric},
+         {"lower_is_better", s.lower_is_better},
+         {"args", s.args}};
+  // Written only when on, so that the recipes before it keep their fingerprints.
+  if (s.milestones) j["milestones"] = true;
+  return j;
 }
 
 // Sets are written in the recipe as an object {"section.field": VALUE} (easier to read than
@@ -159,6 +167,13 @@ std::vector<std::string> AllRefStrings(const RecipeStage& s) {
 }
 
 }  // namespace
+
+std::vector<std::string> SelectionCandidates(const std::vector<std::string>& checkpoints,
+                                             const StageSelect& select) {
+  if (select.milestones) return checkpoints;
+  const size_t k = std::min<size_t>(checkpoints.size(), std::max(1, select.last_k));
+  return std::vector<std::string>(checkpoints.end() - k, checkpoints.end());
+}
 
 int Recipe::Index(const std::string& stage) const {
   for (size_t i = 0; i < stages.size(); ++i) {

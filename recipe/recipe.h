@@ -17,10 +17,13 @@
 namespace perch {
 
 // How a train stage's delivered checkpoint is chosen: each of the run's newest `last_k`
-// checkpoints is evaluated (perch eval, `episodes` episodes on the selection seed), the best by
-// `metric` wins (ties: the newer). last_k 0: the newest checkpoint, no evaluation.
+// checkpoints (with `milestones`, also every milestone checkpoint the run kept: each
+// cluster.milestone_every updates, so the whole run is searched, not only its end) is evaluated
+// (perch eval, `episodes` episodes on the selection seed), the best by `metric` wins (ties: the
+// newer). last_k 0: the newest checkpoint, no evaluation.
 struct StageSelect {
   int last_k = 0;
+  bool milestones = false;
   int episodes = 100;                   // scaled by --scale (floor: min_episodes)
   uint64_t seed = 1;                    // the selection seed; reports use another (docs/recipe.md)
   std::string metric = "success_rate";  // a top-level number of perch eval's JSON
@@ -31,6 +34,12 @@ struct StageSelect {
 // One stage. Strings in `sets` and `args` may hold references "${STAGE.OUTPUT}" (an earlier
 // stage's output file), "${out.OUTPUT}" (this stage's own output file) and "${dir}" (this stage's
 // directory); the stages a stage reads from are its dependencies.
+// The checkpoints a selection evaluates, oldest first, from a run's checkpoint files (sorted by
+// update; the run keeps its milestones and its newest keep_last): the newest last_k (at least
+// one), and with milestones every file.
+std::vector<std::string> SelectionCandidates(const std::vector<std::string>& checkpoints,
+                                             const StageSelect& select);
+
 struct RecipeStage {
   std::string name;
   std::string kind;     // train, sample, mirror, clone, eval, run

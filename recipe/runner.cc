@@ -384,11 +384,11 @@ void Runner::Train(const RecipeStage& s, Live* live, StageRecord* rec) {
     throw std::runtime_error("perch train ended without reaching its stop rule (stop reason \"" +
                              reason + "\"); " + log + ":\n" + LastLines(log, 15));
   }
-  // The delivered checkpoint: the best of the newest K on the selection seed, or the newest.
+  // The delivered checkpoint: the best of the newest K (and the milestones) on the selection
+  // seed, or the newest.
   const std::vector<std::string> ck = Checkpoints(run);
   if (ck.empty()) throw std::runtime_error(run + ": the run left no checkpoint");
-  std::vector<std::string> cand(
-      ck.end() - std::min<size_t>(ck.size(), std::max(1, s.select.last_k)), ck.end());
+  const std::vector<std::string> cand = SelectionCandidates(ck, s.select);
   std::string chosen = ck.back();
   Json figures{{"stop_reason", reason}};
   if (s.select.last_k > 0) {
@@ -401,7 +401,11 @@ void Runner::Train(const RecipeStage& s, Live* live, StageRecord* rec) {
       const std::string out = sd + "/select/" + name + ".json";
       Json result;
       if (fs::exists(out)) result = Json::parse(ReadFileBytes(out), nullptr, false);
-      if (!result.is_object() || !result.contains(s.select.metric)) {
+      // A result of another selection (other episodes or seed, e.g. after --extend) is redone.
+      const bool current = result.is_object() && result.contains(s.select.metric) &&
+                           result.value("episodes", -1) == s.select.episodes &&
+                           result.value("seed", Json()) == Json(s.select.seed);
+      if (!current) {
         {
           std::lock_guard<std::mutex> g(mu_);
           live->phase = "selecting: " + name + " (" + std::to_string(i + 1) + " of " +
@@ -636,7 +640,8 @@ void Runner::MoveAside(const std::vector<std::string>& names) {
 }
 
 // --extend S: a training stage trained on past its recorded end when only its budget (and the
-// learning rate beyond what it trained) changed, so its first samples stay what they were.
+// learning rate beyond what it trained) changed, so its first samples stay what they were; or,
+// its budget unchanged, its delivered checkpoint chosen again when only its select changed.
 void Runner::Extend(const std::string& name) {
   const int i = r_.Index(name);
   if (i < 0) throw ConfigError("--extend: no stage \"" + name + "\" in " + r_.path);
@@ -670,9 +675,16 @@ void Runner::Extend(const std::string& name) {
     auto it = state_.stages.find(n);
     if (it != state_.stages.end() && it->second.state != "pending") readers.push_back(n);
   }
-  std::cerr << "[recipe] " << name << ": extended: continues from its newest checkpoint ("
-            << trained << " samples) to " << next["cluster"]["max_samples"].dump() << " samples; "
-            << readers.size() << " stage(s) that read it are redone\n";
+  if (next["cluster"]["max_samples"].get<int64_t>() <= trained) {
+    // The same budget: only the choice of its checkpoint changed (select).
+    std::cerr << "[recipe] " << name << ": its run is complete (" << trained
+              << " samples); its delivered checkpoint is chosen again; " << readers.size()
+              << " stage(s) that read it are redone\n";
+  } else {
+    std::cerr << "[recipe] " << name << ": extended: continues from its newest checkpoint ("
+              << trained << " samples) to " << next["cluster"]["max_samples"].dump() << " samples; "
+              << readers.size() << " stage(s) that read it are redone\n";
+  }
   if (f_.check) {
     for (const std::string& n : readers) state_.stages.erase(n);  // in memory only: the plan
   } else {

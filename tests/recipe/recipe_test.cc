@@ -139,6 +139,33 @@ TEST(Recipe, FingerprintChangesWithConfigInputsAndScale) {
   EXPECT_EQ(f, StageFingerprint(t, cfg, in));
 }
 
+// select.milestones: the whole run's kept checkpoints are candidates, not only the newest K.
+TEST(Recipe, SelectionSearchesTheMilestonesWhenAsked) {
+  const std::vector<std::string> ck{"c100", "c200", "c300", "c580", "c600", "c611"};
+  StageSelect s;
+  EXPECT_EQ(SelectionCandidates(ck, s), std::vector<std::string>{"c611"});  // last_k 0: newest
+  s.last_k = 3;
+  EXPECT_EQ(SelectionCandidates(ck, s), (std::vector<std::string>{"c580", "c600", "c611"}));
+  s.last_k = 10;
+  EXPECT_EQ(SelectionCandidates(ck, s), ck);
+  s.last_k = 3;
+  s.milestones = true;
+  EXPECT_EQ(SelectionCandidates(ck, s), ck);
+  // In the format: written only when on (older recipes keep their fingerprints), and it needs an
+  // evaluation to choose by.
+  Json r = ThreeStages();
+  r["stages"][2]["select"] = {{"last_k", 3}, {"episodes", 10}};
+  const Recipe before = RecipeFromJson(r, "r.json");
+  RecipeRunOptions o;
+  const std::string f = StageFingerprint(ScaledStage(before.stages[2], o), Json(), {});
+  r["stages"][2]["select"]["milestones"] = false;
+  EXPECT_EQ(f, StageFingerprint(ScaledStage(RecipeFromJson(r, "r.json").stages[2], o), Json(), {}));
+  r["stages"][2]["select"]["milestones"] = true;
+  EXPECT_NE(f, StageFingerprint(ScaledStage(RecipeFromJson(r, "r.json").stages[2], o), Json(), {}));
+  r["stages"][2]["select"] = {{"milestones", true}};
+  EXPECT_NE(ErrorOf(r).find(".milestones: needs last_k >= 1"), std::string::npos) << ErrorOf(r);
+}
+
 TEST(Recipe, ChangeInvalidatesTheStageAndItsReaders) {
   const Recipe r = RecipeFromJson(ThreeStages(), "r.json");
   RecipeState st;

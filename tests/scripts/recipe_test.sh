@@ -97,6 +97,36 @@ last_before=$(grep -o "Run ended (max_samples) at update [0-9]*" "$A/walk1/stage
 [ $((10#$resumed)) -eq $((10#$last_before)) ] ||
   fail "A: --extend resumed from update $resumed, not the finished run's last ($last_before)"
 
+# --extend with only the selection changed: the finished run is not trained further, and every
+# checkpoint it kept (select.milestones) is evaluated on the selection seed, one chosen.
+python3 - "$tmp/longer.json" "$tmp/reselect.json" << 'PY'
+import json, sys
+r = json.load(open(sys.argv[1]))
+w = [s for s in r["stages"] if s["name"] == "walk1"][0]
+w["select"] = {"last_k": 1, "milestones": True, "episodes": 2, "seed": 1,
+               "metric": "no_fall_rate"}
+json.dump(r, open(sys.argv[2], "w"))
+PY
+samples=$(state "$A" "print(d['stages']['walk1']['samples'])")
+kept=$(ls "$A"/walk1/run/checkpoints/ckpt-*.bin | wc -l)
+"$bin" recipe run "$tmp/reselect.json" "${argsX[@]}" --extend walk1 > "$tmp/x.log" 2>&1 ||
+  fail "A: --extend (reselect): $(tail -20 "$tmp/x.log")"
+grep -q "chosen again" "$tmp/x.log" || fail "A: reselect message: $(cat "$tmp/x.log")"
+state "$A" "
+w=d['stages']['walk1']
+assert w['state']=='done', w
+assert w['samples']==$samples, w   # not trained further
+assert len(w['figures']['selection'])==$kept, w
+assert w['figures']['chosen'] in [r['checkpoint']+'.bin' for r in w['figures']['selection']], w
+" || fail "A: walk1 after reselect"
+# Each kept checkpoint evaluated again with the new selection's episodes (the cached results of
+# the earlier selection are not reused).
+for c in "$A"/walk1/run/checkpoints/ckpt-*.bin; do
+  r="$A/walk1/select/$(basename "$c" .bin).json"
+  python3 -c "import json; j=json.load(open('$r')); assert j['episodes']==2 and j['seed']==1, j" ||
+    fail "A: $r is not the new selection's"
+done
+
 # ---- B: the whole recipe at toy scale, killed in a training stage, resumed -------------------
 B=$tmp/b
 argsB=(recipe run recipes/sit_chair.json --dir "$B" --actors 1 --scale 0.0001 --progress-s 5)
