@@ -227,7 +227,18 @@ class Runner {
                 const std::string& stdout_path, Live* live, const std::string& run_dir,
                 int* status);
   void Train(const RecipeStage& s, Live* live, StageRecord* rec);
+  bool SelectCheckpoint(const RecipeStage& s, const std::vector<std::string>& cand, Live* live,
+                        std::string* chosen, Json* figures);
   void Extend(const std::string& name);
+  // Run()'s steps: every done stage's outputs still as recorded; the changed stages said (and
+  // with --force-from, the stages to redo returned); --from/--until checked; the loop.
+  void VerifyOutputs();
+  std::vector<std::string> AcceptChanges();
+  void SetRange();
+  int RunLoop();
+  // The loop's two halves: start the ready stages; reap the finished ones (the run's code).
+  bool StartReadyStages(std::map<std::string, std::thread>* threads, int code);
+  int ReapFinished(std::map<std::string, std::thread>* threads, int code);
   void MoveAside(const std::vector<std::string>& names);
   void Other(const RecipeStage& s, Live* live, StageRecord* rec);
 
@@ -307,6 +318,69 @@ bool Runner::RunChild(const std::vector<std::string>& argv, const std::string& l
       return false;
     }
   }
+}
+
+// The delivered checkpoint of a finished run: each candidate evaluated on the selection seed
+// (cached in the stage's select/), the best by select.metric into *chosen, the table into
+// *figures. False when stopped.
+bool Runner::SelectCheckpoint(const RecipeStage& s, const std::vector<std::string>& cand,
+                              Live* live, std::string* chosen, Json* figures) {
+  const std::string sd = StageDir(s.name);
+  const std::string log = sd + "/stage.log";
+  std::error_code ec;
+  int status = 0;
+  fs::create_directories(sd + "/select", ec);
+  Json table = Json::array();
+  double best = 0;
+  bool have = false;
+  for (size_t i = 0; i < cand.size(); ++i) {
+    const std::string name = fs::path(cand[i]).stem().string();
+    const std::string out = sd + "/select/" + name + ".json";
+    Json result;
+    if (fs::exists(out)) result = Json::parse(ReadFileBytes(out), nullptr, false);
+    // A result of another selection (other episodes or seed, e.g. after --extend) is redone.
+    const bool current = result.is_object() && result.contains(s.select.metric) &&
+                         result.value("episodes", -1) == s.select.episodes &&
+                         result.value("seed", Json()) == Json(s.select.seed);
+    if (!current) {
+      {
+        std::lock_guard<std::mutex> g(mu_);
+        live->phase = "selecting: " + name + " (" + std::to_string(i + 1) + " of " +
+                      std::to_string(cand.size()) + ")";
+      }
+      std::vector<std::string> a = {exe_,         "eval",
+                                    "--model",    cand[i],
+                                    "--episodes", std::to_string(s.select.episodes),
+                                    "--seed",     std::to_string(s.select.seed),
+                                    "--json"};
+      for (const std::string& x : s.select.args) a.push_back(Resolve(s, x));
+      if (!RunChild(a, log, out + ".tmp", live, "", &status)) return false;
+      if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+        throw std::runtime_error("selection eval of " + cand[i] + " " + DescribeStatus(status) +
+                                 "; " + log + ":\n" + LastLines(log, 15));
+      }
+      CommitFileAtomic(out + ".tmp", out);
+      result = Json::parse(ReadFileBytes(out), nullptr, false);
+    }
+    if (!result.is_object() || !result.contains(s.select.metric) ||
+        !result[s.select.metric].is_number()) {
+      throw std::runtime_error(out + ": no number \"" + s.select.metric + "\" (select.metric)");
+    }
+    const double v = result[s.select.metric].get<double>();
+    table.push_back(Json{{"checkpoint", name}, {s.select.metric, v}});
+    // Ties go to the newer checkpoint (later in the list).
+    const bool better = !have || (s.select.lower_is_better ? v <= best : v >= best);
+    if (better) {
+      best = v;
+      *chosen = cand[i];
+      have = true;
+    }
+  }
+  (*figures)["selection"] = table;
+  (*figures)["selection_seed"] = s.select.seed;
+  (*figures)["selection_episodes"] = s.select.episodes;
+  (*figures)[s.select.metric] = best;
+  return true;
 }
 
 void Runner::Train(const RecipeStage& s, Live* live, StageRecord* rec) {
@@ -391,61 +465,9 @@ void Runner::Train(const RecipeStage& s, Live* live, StageRecord* rec) {
   const std::vector<std::string> cand = SelectionCandidates(ck, s.select);
   std::string chosen = ck.back();
   Json figures{{"stop_reason", reason}};
-  if (s.select.last_k > 0) {
-    fs::create_directories(sd + "/select", ec);
-    Json table = Json::array();
-    double best = 0;
-    bool have = false;
-    for (size_t i = 0; i < cand.size(); ++i) {
-      const std::string name = fs::path(cand[i]).stem().string();
-      const std::string out = sd + "/select/" + name + ".json";
-      Json result;
-      if (fs::exists(out)) result = Json::parse(ReadFileBytes(out), nullptr, false);
-      // A result of another selection (other episodes or seed, e.g. after --extend) is redone.
-      const bool current = result.is_object() && result.contains(s.select.metric) &&
-                           result.value("episodes", -1) == s.select.episodes &&
-                           result.value("seed", Json()) == Json(s.select.seed);
-      if (!current) {
-        {
-          std::lock_guard<std::mutex> g(mu_);
-          live->phase = "selecting: " + name + " (" + std::to_string(i + 1) + " of " +
-                        std::to_string(cand.size()) + ")";
-        }
-        std::vector<std::string> a = {exe_,         "eval",
-                                      "--model",    cand[i],
-                                      "--episodes", std::to_string(s.select.episodes),
-                                      "--seed",     std::to_string(s.select.seed),
-                                      "--json"};
-        for (const std::string& x : s.select.args) a.push_back(Resolve(s, x));
-        if (!RunChild(a, log, out + ".tmp", live, "", &status)) {
-          live->code = 130;
-          return;
-        }
-        if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-          throw std::runtime_error("selection eval of " + cand[i] + " " + DescribeStatus(status) +
-                                   "; " + log + ":\n" + LastLines(log, 15));
-        }
-        CommitFileAtomic(out + ".tmp", out);
-        result = Json::parse(ReadFileBytes(out), nullptr, false);
-      }
-      if (!result.is_object() || !result.contains(s.select.metric) ||
-          !result[s.select.metric].is_number()) {
-        throw std::runtime_error(out + ": no number \"" + s.select.metric + "\" (select.metric)");
-      }
-      const double v = result[s.select.metric].get<double>();
-      table.push_back(Json{{"checkpoint", name}, {s.select.metric, v}});
-      // Ties go to the newer checkpoint (later in the list).
-      const bool better = !have || (s.select.lower_is_better ? v <= best : v >= best);
-      if (better) {
-        best = v;
-        chosen = cand[i];
-        have = true;
-      }
-    }
-    figures["selection"] = table;
-    figures["selection_seed"] = s.select.seed;
-    figures["selection_episodes"] = s.select.episodes;
-    figures[s.select.metric] = best;
+  if (s.select.last_k > 0 && !SelectCheckpoint(s, cand, live, &chosen, &figures)) {
+    live->code = 130;
+    return;
   }
   figures["chosen"] = fs::path(chosen).filename().string();
   if (rec->figures.contains("extended_from_samples")) {
@@ -703,17 +725,8 @@ void Runner::Extend(const std::string& name) {
   Save();
 }
 
-int Runner::Run() {
-  std::error_code ec;
-  std::unique_ptr<DirLock> lock;
-  if (!f_.check) {
-    fs::create_directories(dir_, ec);
-    if (ec) throw ConfigError(dir_ + ": cannot create: " + ec.message());
-    lock = std::make_unique<DirLock>(dir_);
-  }
-  state_ = LoadRecipeState(dir_);
-
-  // 1. What was recorded still holds: every done stage's outputs are there, unchanged.
+void Runner::VerifyOutputs() {
+  // What was recorded still holds: every done stage's outputs are there, unchanged.
   for (const RecipeStage& s : r_.stages) {
     auto it = state_.stages.find(s.name);
     if (it == state_.stages.end() || it->second.state != "done") continue;
@@ -733,11 +746,10 @@ int Runner::Run() {
       }
     }
   }
-  if (!f_.force_from.empty() && r_.Index(f_.force_from) < 0) {
-    throw ConfigError("--force-from: no stage \"" + f_.force_from + "\" in " + r_.path);
-  }
-  if (!f_.extend.empty()) Extend(f_.extend);
-  // 2. Stages whose config, inputs or scale changed, said before anything runs.
+}
+
+// Stages whose config, inputs or scale changed, said before anything runs.
+std::vector<std::string> Runner::AcceptChanges() {
   for (const RecipeStage& s : r_.stages) fingerprints_[s.name] = Fingerprint(s);
   std::vector<std::string> changed;
   for (const std::string& n : InvalidatedStages(r_, state_, fingerprints_)) {
@@ -777,7 +789,10 @@ int Runner::Run() {
     MoveAside(redo);
     for (const RecipeStage& s : r_.stages) fingerprints_[s.name] = Fingerprint(s);
   }
-  // 3. The range.
+  return redo;
+}
+
+void Runner::SetRange() {
   const int from = f_.from.empty() ? 0 : r_.Index(f_.from);
   const int until = f_.until.empty() ? static_cast<int>(r_.stages.size()) - 1 : r_.Index(f_.until);
   if (from < 0) throw ConfigError("--from: no stage \"" + f_.from + "\" in " + r_.path);
@@ -795,61 +810,93 @@ int Runner::Run() {
       }
     }
   }
-  // Every stage has a record (pending until it starts), so the state file lists them all.
-  for (const RecipeStage& s : r_.stages) state_.stages.emplace(s.name, StageRecord{});
-  if (f_.check) {
-    int done = 0;
-    for (const RecipeStage& s : r_.stages) done += state_.stages[s.name].state == "done";
-    std::cerr << "perch recipe: " << r_.path << " OK: " << r_.stages.size() << " stages, " << done
-              << " done in " << dir_ << "; would run " << r_.stages[from].name << " .. "
-              << r_.stages[until].name << (redo.empty() ? "" : " (redoing some: --force-from)")
-              << "\n";
-    return 0;
-  }
-  // The recipe as run, beside its state (status reads it; a copy is not a path into a checkout),
-  // once it is accepted: a refused change leaves the last one.
-  WriteFileAtomic(dir_ + "/recipe.json", LoadJsonFile(r_.path).dump(2) + "\n");
-  Save();
-  std::cerr << "[recipe] " << r_.name << " in " << dir_ << " (scale " << f_.options.scale
-            << ", up to " << f_.parallel << " stage(s) at once)\n";
+}
 
-  // 4. Run: ready stages (every input done) start, up to --parallel at once.
+// Ready stages (every input done) start, up to --parallel at once. True when every stage in the
+// range is done.
+bool Runner::StartReadyStages(std::map<std::string, std::thread>* threads, int code) {
+  bool all_done = true;
+  {
+    std::lock_guard<std::mutex> g(mu_);
+    for (int i = from_; i <= until_ && code == 0; ++i) {
+      const RecipeStage& s = r_.stages[i];
+      StageRecord& rec = state_.stages[s.name];
+      if (rec.state == "done") continue;
+      all_done = false;
+      if (threads->count(s.name)) continue;
+      bool ready = true;
+      for (const std::string& d : s.deps) ready = ready && state_.stages[d].state == "done";
+      if (!ready || static_cast<int>(threads->size()) >= f_.parallel) continue;
+      if (f_.stop && f_.stop->load()) continue;
+      rec.state = "running";
+      rec.attempt_started_unix = UnixNow();
+      rec.attempts += 1;
+      rec.fingerprint = fingerprints_[s.name].empty() ? Fingerprint(s) : fingerprints_[s.name];
+      if (rec.started_at.empty()) rec.started_at = UtcStamp();
+      Live& l = live_[s.name];
+      l.samples = 0;
+      l.samples0 = -1;
+      l.finished = false;
+      l.code = 0;
+      l.t0 = Now();
+      l.phase = "starting";
+      SaveRecipeState(dir_, state_);
+      std::cerr << "[recipe] stage " << s.name << " (" << s.kind << ", " << (i + 1) << " of "
+                << r_.stages.size() << ")" << (rec.attempts > 1 ? ": continuing" : ": starting")
+                << (s.doc.empty() ? "" : " — " + s.doc) << "\n";
+      (*threads)[s.name] = std::thread([this, &s, &l] { RunStage(s, &l); });
+    }
+  }
+  return all_done;
+}
+
+int Runner::ReapFinished(std::map<std::string, std::thread>* threads, int code) {
+  for (auto it = threads->begin(); it != threads->end();) {
+    bool fin;
+    int c;
+    {
+      std::lock_guard<std::mutex> g(mu_);
+      fin = live_[it->first].finished;
+      c = live_[it->first].code;
+    }
+    if (!fin) {
+      ++it;
+      continue;
+    }
+    it->second.join();
+    std::lock_guard<std::mutex> g(mu_);
+    StageRecord& rec = state_.stages[it->first];
+    try {
+      SaveRecipeState(dir_, state_);
+    } catch (const std::exception& e) {
+      std::cerr << "[recipe] cannot save " << StatePath(dir_) << ": " << e.what()
+                << " (the stage's files are kept; the same command continues once fixed)\n";
+      code = 1;
+    }
+    if (c == 0) {
+      std::cerr << "[recipe] stage " << it->first << ": done in " << Duration(rec.wall_s)
+                << (rec.samples ? ", " + Count(static_cast<double>(rec.samples)) + " samples" : "")
+                << "; figures " << rec.figures.dump() << "\n";
+    } else if (c == 1) {
+      std::cerr << "[recipe] stage " << it->first << " FAILED: " << rec.error
+                << "\n[recipe] fix the cause and run the same command again: it continues at "
+                << it->first << "\n";
+      code = 1;
+      if (f_.stop) f_.stop->store(true);  // others stop at a checkpoint, resumable
+    } else if (code == 0) {
+      code = 130;
+    }
+    it = threads->erase(it);
+  }
+  return code;
+}
+
+int Runner::RunLoop() {
   std::map<std::string, std::thread> threads;
   int code = 0;
   double last_progress = Now();
   for (;;) {
-    bool all_done = true;
-    {
-      std::lock_guard<std::mutex> g(mu_);
-      for (int i = from; i <= until && code == 0; ++i) {
-        const RecipeStage& s = r_.stages[i];
-        StageRecord& rec = state_.stages[s.name];
-        if (rec.state == "done") continue;
-        all_done = false;
-        if (threads.count(s.name)) continue;
-        bool ready = true;
-        for (const std::string& d : s.deps) ready = ready && state_.stages[d].state == "done";
-        if (!ready || static_cast<int>(threads.size()) >= f_.parallel) continue;
-        if (f_.stop && f_.stop->load()) continue;
-        rec.state = "running";
-        rec.attempt_started_unix = UnixNow();
-        rec.attempts += 1;
-        rec.fingerprint = fingerprints_[s.name].empty() ? Fingerprint(s) : fingerprints_[s.name];
-        if (rec.started_at.empty()) rec.started_at = UtcStamp();
-        Live& l = live_[s.name];
-        l.samples = 0;
-        l.samples0 = -1;
-        l.finished = false;
-        l.code = 0;
-        l.t0 = Now();
-        l.phase = "starting";
-        SaveRecipeState(dir_, state_);
-        std::cerr << "[recipe] stage " << s.name << " (" << s.kind << ", " << (i + 1) << " of "
-                  << r_.stages.size() << ")" << (rec.attempts > 1 ? ": continuing" : ": starting")
-                  << (s.doc.empty() ? "" : " — " + s.doc) << "\n";
-        threads[s.name] = std::thread([this, &s, &l] { RunStage(s, &l); });
-      }
-    }
+    const bool all_done = StartReadyStages(&threads, code);
     if (all_done && threads.empty()) break;
     if (threads.empty() && code != 0) break;
     if (threads.empty() && f_.stop && f_.stop->load()) {
@@ -861,45 +908,7 @@ int Runner::Run() {
       throw ConfigError("no stage can start: an input of a stage in range is not done");
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
-    // Reap finished stages.
-    for (auto it = threads.begin(); it != threads.end();) {
-      bool fin;
-      int c;
-      {
-        std::lock_guard<std::mutex> g(mu_);
-        fin = live_[it->first].finished;
-        c = live_[it->first].code;
-      }
-      if (!fin) {
-        ++it;
-        continue;
-      }
-      it->second.join();
-      std::lock_guard<std::mutex> g(mu_);
-      StageRecord& rec = state_.stages[it->first];
-      try {
-        SaveRecipeState(dir_, state_);
-      } catch (const std::exception& e) {
-        std::cerr << "[recipe] cannot save " << StatePath(dir_) << ": " << e.what()
-                  << " (the stage's files are kept; the same command continues once fixed)\n";
-        code = 1;
-      }
-      if (c == 0) {
-        std::cerr << "[recipe] stage " << it->first << ": done in " << Duration(rec.wall_s)
-                  << (rec.samples ? ", " + Count(static_cast<double>(rec.samples)) + " samples"
-                                  : "")
-                  << "; figures " << rec.figures.dump() << "\n";
-      } else if (c == 1) {
-        std::cerr << "[recipe] stage " << it->first << " FAILED: " << rec.error
-                  << "\n[recipe] fix the cause and run the same command again: it continues at "
-                  << it->first << "\n";
-        code = 1;
-        if (f_.stop) f_.stop->store(true);  // others stop at a checkpoint, resumable
-      } else if (code == 0) {
-        code = 130;
-      }
-      it = threads.erase(it);
-    }
+    code = ReapFinished(&threads, code);
     if (Now() - last_progress >= f_.progress_s && !threads.empty()) {
       Progress();
       last_progress = Now();
@@ -908,10 +917,47 @@ int Runner::Run() {
   if (code == 130) {
     std::cerr << "[recipe] stopped; the same command continues where it stopped\n";
   } else if (code == 0) {
-    std::cerr << "[recipe] stages " << r_.stages[from].name << " .. " << r_.stages[until].name
+    std::cerr << "[recipe] stages " << r_.stages[from_].name << " .. " << r_.stages[until_].name
               << " done (perch recipe status --dir " << f_.dir << ")\n";
   }
   return code;
+}
+
+int Runner::Run() {
+  std::error_code ec;
+  std::unique_ptr<DirLock> lock;
+  if (!f_.check) {
+    fs::create_directories(dir_, ec);
+    if (ec) throw ConfigError(dir_ + ": cannot create: " + ec.message());
+    lock = std::make_unique<DirLock>(dir_);
+  }
+  state_ = LoadRecipeState(dir_);
+  VerifyOutputs();
+  if (!f_.force_from.empty() && r_.Index(f_.force_from) < 0) {
+    throw ConfigError("--force-from: no stage \"" + f_.force_from + "\" in " + r_.path);
+  }
+  if (!f_.extend.empty()) Extend(f_.extend);
+  const std::vector<std::string> redo = AcceptChanges();
+  SetRange();
+  // Every stage has a record (pending until it starts), so the state file lists them all.
+  for (const RecipeStage& s : r_.stages) state_.stages.emplace(s.name, StageRecord{});
+  if (f_.check) {
+    int done = 0;
+    for (const RecipeStage& s : r_.stages) done += state_.stages[s.name].state == "done";
+    std::cerr << "perch recipe: " << r_.path << " OK: " << r_.stages.size() << " stages, " << done
+              << " done in " << dir_ << "; would run " << r_.stages[from_].name << " .. "
+              << r_.stages[until_].name << (redo.empty() ? "" : " (redoing some: --force-from)")
+              << "\n";
+    return 0;
+  }
+  // The recipe as run, beside its state (status reads it; a copy is not a path into a checkout),
+  // once it is accepted: a refused change leaves the last one.
+  WriteFileAtomic(dir_ + "/recipe.json", LoadJsonFile(r_.path).dump(2) + "\n");
+  Save();
+  std::cerr << "[recipe] " << r_.name << " in " << dir_ << " (scale " << f_.options.scale
+            << ", up to " << f_.parallel << " stage(s) at once)\n";
+
+  return RunLoop();
 }
 
 }  // namespace
