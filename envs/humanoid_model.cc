@@ -66,6 +66,138 @@ Eigen::Isometry3d HingeTransform(const Joint& j, double q) {
   return t;
 }
 
+Geom ReadGeom(const Json& jg, const std::string& gctx) {
+  std::string type;
+  GetRequired(jg, "type", type, gctx);
+  Geom g;
+  if (type == "capsule") {
+    CheckKnownKeys(jg, {"type", "fromto", "radius"}, gctx);
+    const auto ft = ReadNumbers(jg, "fromto", 6, gctx);
+    g.type = Geom::Type::kCapsule;
+    g.from = Eigen::Vector3d(ft[0], ft[1], ft[2]);
+    g.to = Eigen::Vector3d(ft[3], ft[4], ft[5]);
+  } else if (type == "sphere") {
+    CheckKnownKeys(jg, {"type", "pos", "radius"}, gctx);
+    g.type = Geom::Type::kSphere;
+    g.from = g.to = ReadVec3(jg, "pos", gctx);
+  } else {
+    throw ConfigError(gctx + ".type: expected \"capsule\" or \"sphere\", got \"" + type + "\"");
+  }
+  g.radius = ReadPositive(jg, "radius", gctx, true, 0.0);
+  return g;
+}
+
+// Mass properties: density x volume per geom, combined about the body's centre of mass; an
+// explicit "mass" rescales the density-derived mass and inertia.
+void SetMassProperties(const Json& jb, const std::string& bctx, double density, Body* b) {
+  double mass = 0.0;
+  Eigen::Vector3d moment = Eigen::Vector3d::Zero();
+  std::vector<std::tuple<double, Eigen::Vector3d, Eigen::Matrix3d>> parts;
+  for (const Geom& g : b->geoms) {
+    double gm;
+    Eigen::Vector3d gc;
+    Eigen::Matrix3d gi;
+    GeomMassProperties(g, density, &gm, &gc, &gi);
+    parts.emplace_back(gm, gc, gi);
+    mass += gm;
+    moment += gm * gc;
+  }
+  b->com = moment / mass;
+  b->inertia.setZero();
+  for (const auto& [gm, gc, gi] : parts) {
+    const Eigen::Matrix3d s = Skew(gc - b->com);
+    b->inertia += gi - gm * s * s;  // parallel axis theorem
+  }
+  if (jb.contains("mass")) {
+    const double given = ReadPositive(jb, "mass", bctx, true, 0.0);
+    b->inertia *= given / mass;
+    mass = given;
+  }
+  b->mass = mass;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(b->inertia);
+  b->principal_rot = eig.eigenvectors();
+  if (b->principal_rot.determinant() < 0) b->principal_rot.col(2) *= -1.0;
+  b->principal_inertia = eig.eigenvalues();
+}
+
+// A hinge of body `body_index`; its name unique among `earlier` (the file's joints so far).
+Joint ReadJoint(const Json& jj, const std::string& jctx, int body_index, double power_to_torque,
+                const std::vector<Joint>& earlier) {
+  CheckKnownKeys(jj, {"name", "axis", "pos", "range", "power", "max_torque", "kp", "kd"}, jctx);
+  Joint j;
+  GetRequired(jj, "name", j.name, jctx);
+  for (const Joint& o : earlier) {
+    if (o.name == j.name) throw ConfigError(jctx + ".name: duplicate joint '" + j.name + "'");
+  }
+  j.body = body_index;
+  const Eigen::Vector3d axis = ReadVec3(jj, "axis", jctx);
+  if (axis.norm() < 1e-9) throw ConfigError(jctx + ".axis: zero axis");
+  j.axis = axis.normalized();
+  j.anchor = ReadVec3(jj, "pos", jctx);
+  const auto range = ReadNumbers(jj, "range", 2, jctx);
+  if (!(range[0] < range[1])) {
+    throw ConfigError(jctx + ".range: lower must be below upper (degrees)");
+  }
+  j.lower = range[0] * M_PI / 180.0;
+  j.upper = range[1] * M_PI / 180.0;
+  j.power = ReadPositive(jj, "power", jctx, true, 0.0);
+  j.max_torque = ReadPositive(jj, "max_torque", jctx, false, power_to_torque * j.power);
+  j.kp = ReadPositive(jj, "kp", jctx, true, 0.0);
+  j.kd = ReadPositive(jj, "kd", jctx, false, 0.0);
+  return j;
+}
+
+// Body `body_index` of the file (its geoms, mass properties and hinges; the hinges appended to
+// *file_joints); `m` holds the bodies before it (names, parents).
+Body ReadBody(const Json& jb, const std::string& ctx, const std::string& bctx,
+              const std::string& root_body, const HumanoidModel& m, int body_index, double density,
+              double power_to_torque, std::vector<Joint>* file_joints) {
+  CheckKnownKeys(jb, {"name", "parent", "pos", "quat", "geoms", "joints", "mass"}, bctx);
+  Body b;
+  GetRequired(jb, "name", b.name, bctx);
+  if (m.FindBody(b.name) >= 0) throw ConfigError(bctx + ".name: duplicate body '" + b.name + "'");
+  std::string parent;
+  GetRequired(jb, "parent", parent, bctx);
+  if (body_index == 0) {
+    if (!parent.empty()) throw ConfigError(bctx + ".parent: the first body is the root: use \"\"");
+    if (b.name != root_body) {
+      throw ConfigError(ctx + ".root_body: '" + root_body + "' must be the first body");
+    }
+  } else {
+    b.parent = m.FindBody(parent);
+    if (b.parent < 0) {
+      throw ConfigError(bctx + ".parent: unknown body '" + parent +
+                        "' (parents must come before their children)");
+    }
+  }
+  b.offset = ReadVec3(jb, "pos", bctx);
+  const auto qv = ReadNumbers(jb, "quat", 4, bctx);
+  const Eigen::Quaterniond quat(qv[0], qv[1], qv[2], qv[3]);  // w, x, y, z
+  if (quat.norm() < 1e-9) throw ConfigError(bctx + ".quat: zero quaternion");
+  b.orientation = quat.normalized();
+
+  if (!jb.contains("geoms") || !jb["geoms"].is_array() || jb["geoms"].empty()) {
+    throw ConfigError(bctx + ".geoms: expected a non-empty array");
+  }
+  for (size_t gi = 0; gi < jb["geoms"].size(); ++gi) {
+    b.geoms.push_back(ReadGeom(jb["geoms"][gi], bctx + ".geoms[" + std::to_string(gi) + "]"));
+  }
+  SetMassProperties(jb, bctx, density, &b);
+  if (jb.contains("joints")) {
+    if (!jb["joints"].is_array()) throw ConfigError(bctx + ".joints: expected an array");
+    for (size_t ji = 0; ji < jb["joints"].size(); ++ji) {
+      const std::string jctx = bctx + ".joints[" + std::to_string(ji) + "]";
+      b.joints.push_back(static_cast<int>(file_joints->size()));
+      file_joints->push_back(
+          ReadJoint(jb["joints"][ji], jctx, body_index, power_to_torque, *file_joints));
+    }
+  }
+  if (body_index > 0 && b.joints.empty()) {
+    throw ConfigError(bctx + ".joints: a non-root body needs at least one hinge");
+  }
+  return b;
+}
+
 }  // namespace
 
 void GeomMassProperties(const Geom& g, double density, double* mass, Eigen::Vector3d* com,
@@ -121,126 +253,9 @@ HumanoidModel HumanoidModel::Load(const std::string& path) {
   std::vector<Joint> file_joints;
   const Json& jbodies = root["bodies"];
   for (size_t bi = 0; bi < jbodies.size(); ++bi) {
-    const Json& jb = jbodies[bi];
     const std::string bctx = ctx + ".bodies[" + std::to_string(bi) + "]";
-    CheckKnownKeys(jb, {"name", "parent", "pos", "quat", "geoms", "joints", "mass"}, bctx);
-    Body b;
-    GetRequired(jb, "name", b.name, bctx);
-    if (m.FindBody(b.name) >= 0) throw ConfigError(bctx + ".name: duplicate body '" + b.name + "'");
-    std::string parent;
-    GetRequired(jb, "parent", parent, bctx);
-    if (bi == 0) {
-      if (!parent.empty())
-        throw ConfigError(bctx + ".parent: the first body is the root: use \"\"");
-      if (b.name != root_body) {
-        throw ConfigError(ctx + ".root_body: '" + root_body + "' must be the first body");
-      }
-    } else {
-      b.parent = m.FindBody(parent);
-      if (b.parent < 0) {
-        throw ConfigError(bctx + ".parent: unknown body '" + parent +
-                          "' (parents must come before their children)");
-      }
-    }
-    b.offset = ReadVec3(jb, "pos", bctx);
-    const auto qv = ReadNumbers(jb, "quat", 4, bctx);
-    const Eigen::Quaterniond quat(qv[0], qv[1], qv[2], qv[3]);  // w, x, y, z
-    if (quat.norm() < 1e-9) throw ConfigError(bctx + ".quat: zero quaternion");
-    b.orientation = quat.normalized();
-
-    if (!jb.contains("geoms") || !jb["geoms"].is_array() || jb["geoms"].empty()) {
-      throw ConfigError(bctx + ".geoms: expected a non-empty array");
-    }
-    for (size_t gi = 0; gi < jb["geoms"].size(); ++gi) {
-      const Json& jg = jb["geoms"][gi];
-      const std::string gctx = bctx + ".geoms[" + std::to_string(gi) + "]";
-      std::string type;
-      GetRequired(jg, "type", type, gctx);
-      Geom g;
-      if (type == "capsule") {
-        CheckKnownKeys(jg, {"type", "fromto", "radius"}, gctx);
-        const auto ft = ReadNumbers(jg, "fromto", 6, gctx);
-        g.type = Geom::Type::kCapsule;
-        g.from = Eigen::Vector3d(ft[0], ft[1], ft[2]);
-        g.to = Eigen::Vector3d(ft[3], ft[4], ft[5]);
-      } else if (type == "sphere") {
-        CheckKnownKeys(jg, {"type", "pos", "radius"}, gctx);
-        g.type = Geom::Type::kSphere;
-        g.from = g.to = ReadVec3(jg, "pos", gctx);
-      } else {
-        throw ConfigError(gctx + ".type: expected \"capsule\" or \"sphere\", got \"" + type + "\"");
-      }
-      g.radius = ReadPositive(jg, "radius", gctx, true, 0.0);
-      b.geoms.push_back(g);
-    }
-
-    // Mass properties: density x volume per geom, combined about the body's centre of mass.
-    double mass = 0.0;
-    Eigen::Vector3d moment = Eigen::Vector3d::Zero();
-    std::vector<std::tuple<double, Eigen::Vector3d, Eigen::Matrix3d>> parts;
-    for (const Geom& g : b.geoms) {
-      double gm;
-      Eigen::Vector3d gc;
-      Eigen::Matrix3d gi;
-      GeomMassProperties(g, m.density_, &gm, &gc, &gi);
-      parts.emplace_back(gm, gc, gi);
-      mass += gm;
-      moment += gm * gc;
-    }
-    b.com = moment / mass;
-    b.inertia.setZero();
-    for (const auto& [gm, gc, gi] : parts) {
-      const Eigen::Matrix3d s = Skew(gc - b.com);
-      b.inertia += gi - gm * s * s;  // parallel axis theorem
-    }
-    // An explicit mass rescales the density-derived mass and inertia.
-    if (jb.contains("mass")) {
-      const double given = ReadPositive(jb, "mass", bctx, true, 0.0);
-      b.inertia *= given / mass;
-      mass = given;
-    }
-    b.mass = mass;
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(b.inertia);
-    b.principal_rot = eig.eigenvectors();
-    if (b.principal_rot.determinant() < 0) b.principal_rot.col(2) *= -1.0;
-    b.principal_inertia = eig.eigenvalues();
-
-    const int body_index = static_cast<int>(m.bodies_.size());
-    if (jb.contains("joints")) {
-      if (!jb["joints"].is_array()) throw ConfigError(bctx + ".joints: expected an array");
-      for (size_t ji = 0; ji < jb["joints"].size(); ++ji) {
-        const Json& jj = jb["joints"][ji];
-        const std::string jctx = bctx + ".joints[" + std::to_string(ji) + "]";
-        CheckKnownKeys(jj, {"name", "axis", "pos", "range", "power", "max_torque", "kp", "kd"},
-                       jctx);
-        Joint j;
-        GetRequired(jj, "name", j.name, jctx);
-        for (const Joint& o : file_joints) {
-          if (o.name == j.name) throw ConfigError(jctx + ".name: duplicate joint '" + j.name + "'");
-        }
-        j.body = body_index;
-        const Eigen::Vector3d axis = ReadVec3(jj, "axis", jctx);
-        if (axis.norm() < 1e-9) throw ConfigError(jctx + ".axis: zero axis");
-        j.axis = axis.normalized();
-        j.anchor = ReadVec3(jj, "pos", jctx);
-        const auto range = ReadNumbers(jj, "range", 2, jctx);
-        if (!(range[0] < range[1])) {
-          throw ConfigError(jctx + ".range: lower must be below upper (degrees)");
-        }
-        j.lower = range[0] * M_PI / 180.0;
-        j.upper = range[1] * M_PI / 180.0;
-        j.power = ReadPositive(jj, "power", jctx, true, 0.0);
-        j.max_torque = ReadPositive(jj, "max_torque", jctx, false, power_to_torque * j.power);
-        j.kp = ReadPositive(jj, "kp", jctx, true, 0.0);
-        j.kd = ReadPositive(jj, "kd", jctx, false, 0.0);
-        b.joints.push_back(static_cast<int>(file_joints.size()));
-        file_joints.push_back(j);
-      }
-    }
-    if (bi > 0 && b.joints.empty()) {
-      throw ConfigError(bctx + ".joints: a non-root body needs at least one hinge");
-    }
-    m.bodies_.push_back(b);
+    m.bodies_.push_back(ReadBody(jbodies[bi], ctx, bctx, root_body, m, static_cast<int>(bi),
+                                 m.density_, power_to_torque, &file_joints));
   }
 
   // Observation order re-indexes the joints; it must list every joint exactly once.
