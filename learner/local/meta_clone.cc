@@ -100,6 +100,147 @@ void CheckCloneInit(const PolicyConfig& pc, const NormalizerConfig& norm,
   }
 }
 
+namespace {
+
+// The samples of every round so far: observations [obs_dim] and labels (class, target theta,
+// target dist) per meta step, and whether the label hands over to another subtask.
+struct CloneData {
+  std::vector<float> obs, labels;
+  std::vector<uint8_t> changes;
+  int size() const { return static_cast<int>(labels.size() / 3); }
+};
+
+// One round's episodes, spread over threads; episode i of a round always gets the same seed.
+// With a policy (DAgger) it acts with probability 1 - beta, the planner otherwise.
+std::vector<Episode> CollectRound(const TaskEnvConfig& config,
+                                  const std::vector<FrozenPolicyData>& frozen,
+                                  const PolicyConfig& pc, const NormalizerConfig& norm,
+                                  const std::shared_ptr<const MetaPlan>& plan,
+                                  const CloneOptions& o, const proto::ModelWeights& weights,
+                                  int round, bool dagger, double beta) {
+  std::vector<Episode> eps(o.episodes);
+  std::atomic<int> next{0};
+  std::exception_ptr error;
+  std::mutex mu;
+  auto worker = [&]() {
+    try {
+      MetaEnv env(config);
+      env.SetFrozenPolicies(frozen);
+      Teacher planner(plan, config, frozen);
+      std::unique_ptr<PolicyRunner> runner;
+      if (dagger) {
+        runner = std::make_unique<PolicyRunner>(pc, norm);
+        runner->LoadWeights(weights);
+        runner->set_update_obs_stats(false);
+      }
+      for (int i = next++; i < o.episodes; i = next++) {
+        const uint64_t seed = (o.seed * 1000003ULL + static_cast<uint64_t>(round)) * 1000003ULL +
+                              static_cast<uint64_t>(i);
+        eps[i] = Collect(env, planner, runner.get(), beta, seed);
+      }
+    } catch (...) {
+      std::lock_guard<std::mutex> lock(mu);
+      if (!error) error = std::current_exception();
+      next = o.episodes;
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int t = 0; t < std::clamp(o.threads, 1, o.episodes); ++t) pool.emplace_back(worker);
+  for (std::thread& t : pool) t.join();
+  if (error) std::rethrow_exception(error);
+  return eps;
+}
+
+// Fits the model to all data so far: the normaliser from the data, then maximum likelihood
+// (hand-over steps weighted by switch_weight). Returns the last epoch's mean NLL.
+double FitRound(const CloneData& d, const PolicyConfig& pc, const NormalizerConfig& norm,
+                const CloneOptions& o, int round, ActorCritic* model, Adam* adam,
+                RunningMeanStd* stats) {
+  const int n = d.size();
+  *stats = RunningMeanStd(pc.obs_dim, norm.initial_count);
+  stats->UpdateBatch(d.obs.data(), n);
+  ObsNormalizer normalizer(pc.obs_dim, norm);
+  normalizer.stats() = *stats;
+  normalizer.Refresh();
+  MatrixXf x(pc.obs_dim, n);
+  MatrixXf a(3, n);
+  for (int i = 0; i < n; ++i) {
+    normalizer.Normalize(d.obs.data() + static_cast<size_t>(i) * pc.obs_dim, x.col(i).data());
+    for (int k = 0; k < 3; ++k) a(k, i) = d.labels[3 * static_cast<size_t>(i) + k];
+  }
+  std::vector<int> order(n);
+  std::iota(order.begin(), order.end(), 0);
+  Rng shuffle(o.seed * 7919ULL + static_cast<uint64_t>(round));
+  PolicyEvalCache cache;
+  VectorXf grad(model->num_params());
+  double last_nll = 0.0;
+  for (int epoch = 0; epoch < o.epochs; ++epoch) {
+    for (int i = n - 1; i > 0; --i) std::swap(order[i], order[shuffle.UniformInt(i + 1)]);
+    double nll = 0.0;
+    for (int start = 0; start < n; start += o.minibatch) {
+      const int b = std::min(o.minibatch, n - start);
+      MatrixXf xb(pc.obs_dim, b), ab(3, b);
+      VectorXf w(b);
+      for (int k = 0; k < b; ++k) {
+        xb.col(k) = x.col(order[start + k]);
+        ab.col(k) = a.col(order[start + k]);
+        w[k] = d.changes[order[start + k]] ? static_cast<float>(o.switch_weight) : 1.0f;
+      }
+      model->Evaluate(model->params().data(), xb, ab, &cache);
+      nll -= cache.log_prob.sum();
+      grad.setZero();
+      // Ascend the weighted mean log-likelihood: Adam descends -grad.
+      const VectorXf dlogp = -w / w.sum();
+      model->Backward(model->params().data(), dlogp, VectorXf::Zero(b), VectorXf::Zero(b), &cache,
+                      grad.data());
+      grad.array() *= model->trainable_mask().array();
+      adam->Step(model->params(), grad, o.learning_rate);
+    }
+    last_nll = nll / n;
+  }
+  return last_nll;
+}
+
+// How well the clone (its deterministic actions) matches the labels: switch accuracy overall and
+// at hand-overs, walk-target error.
+struct CloneScore {
+  double accuracy = 0.0, handover_accuracy = 0.0, target_err_m = 0.0;
+  int handovers = 0, walk_samples = 0;
+};
+CloneScore ScoreClone(const CloneData& d, const PolicyConfig& pc, const NormalizerConfig& norm,
+                      const proto::ModelWeights& weights) {
+  const int n = d.size();
+  PolicyRunner runner(pc, norm);
+  runner.LoadWeights(weights);
+  runner.set_update_obs_stats(false);
+  Rng unused(0);
+  std::vector<float> act(3);
+  int right = 0, changes_right = 0;
+  CloneScore s;
+  std::vector<double> target_err;
+  for (int i = 0; i < n; ++i) {
+    const float* label = d.labels.data() + 3 * static_cast<size_t>(i);
+    runner.Act(d.obs.data() + static_cast<size_t>(i) * pc.obs_dim, unused, true, nullptr,
+               act.data());
+    const bool ok = static_cast<int>(std::lround(act[0])) == static_cast<int>(label[0]);
+    right += ok;
+    s.handovers += d.changes[i];
+    changes_right += d.changes[i] && ok;
+    if (static_cast<int>(label[0]) == pc.target_choice) {
+      ++s.walk_samples;
+      const double ex = label[2] * std::cos(label[1]), ey = label[2] * std::sin(label[1]);
+      const double cx = act[2] * std::cos(act[1]), cy = act[2] * std::sin(act[1]);
+      target_err.push_back(std::hypot(ex - cx, ey - cy));
+    }
+  }
+  s.accuracy = static_cast<double>(right) / n;
+  s.handover_accuracy = s.handovers ? static_cast<double>(changes_right) / s.handovers : 0.0;
+  s.target_err_m = MeanOf(target_err);
+  return s;
+}
+
+}  // namespace
+
 CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolicyData>& frozen,
                       const PolicyConfig& pc, const NormalizerConfig& norm,
                       std::shared_ptr<const MetaPlan> plan, const CloneOptions& o) {
@@ -121,8 +262,7 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
   }
   RunningMeanStd stats(pc.obs_dim, norm.initial_count);
   Adam adam(model.num_params(), 0.9f, 0.999f, 1e-5f);
-  std::vector<float> all_obs, all_labels;
-  std::vector<uint8_t> all_changes;
+  CloneData data;
   Json rounds = Json::array();
   proto::ModelWeights weights;
   auto export_weights = [&]() {
@@ -142,45 +282,17 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
     // Round 1 is plain cloning, unless a previous stage's policy is there to drive it.
     const bool dagger = round > 0 || o.init.has_value();
     const double beta = dagger ? o.dagger_beta : 1.0;
-    std::vector<Episode> eps(o.episodes);
-    std::atomic<int> next{0};
-    std::exception_ptr error;
-    std::mutex mu;
-    auto worker = [&]() {
-      try {
-        MetaEnv env(config);
-        env.SetFrozenPolicies(frozen);
-        Teacher planner(plan, config, frozen);
-        std::unique_ptr<PolicyRunner> runner;
-        if (dagger) {
-          runner = std::make_unique<PolicyRunner>(pc, norm);
-          runner->LoadWeights(weights);
-          runner->set_update_obs_stats(false);
-        }
-        for (int i = next++; i < o.episodes; i = next++) {
-          const uint64_t seed = (o.seed * 1000003ULL + static_cast<uint64_t>(round)) * 1000003ULL +
-                                static_cast<uint64_t>(i);
-          eps[i] = Collect(env, planner, runner.get(), beta, seed);
-        }
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(mu);
-        if (!error) error = std::current_exception();
-        next = o.episodes;
-      }
-    };
-    std::vector<std::thread> pool;
-    for (int t = 0; t < std::clamp(o.threads, 1, o.episodes); ++t) pool.emplace_back(worker);
-    for (std::thread& t : pool) t.join();
-    if (error) std::rethrow_exception(error);
+    const std::vector<Episode> eps =
+        CollectRound(config, frozen, pc, norm, plan, o, weights, round, dagger, beta);
     int successes = 0, steps = 0;
     for (const Episode& e : eps) {
-      all_obs.insert(all_obs.end(), e.obs.begin(), e.obs.end());
-      all_labels.insert(all_labels.end(), e.labels.begin(), e.labels.end());
-      all_changes.insert(all_changes.end(), e.changes.begin(), e.changes.end());
+      data.obs.insert(data.obs.end(), e.obs.begin(), e.obs.end());
+      data.labels.insert(data.labels.end(), e.labels.begin(), e.labels.end());
+      data.changes.insert(data.changes.end(), e.changes.begin(), e.changes.end());
       successes += e.success;
       steps += e.steps;
     }
-    const int n = static_cast<int>(all_labels.size() / 3);
+    const int n = data.size();
     if (o.progress) {
       o.progress("meta-clone: round " + std::to_string(round + 1) + "/" + std::to_string(o.rounds) +
                  ": " + std::to_string(o.episodes) + " episodes (" +
@@ -190,47 +302,7 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
     }
 
     // --- fit: normaliser from all data so far, then maximum likelihood ---
-    stats = RunningMeanStd(pc.obs_dim, norm.initial_count);
-    stats.UpdateBatch(all_obs.data(), n);
-    ObsNormalizer normalizer(pc.obs_dim, norm);
-    normalizer.stats() = stats;
-    normalizer.Refresh();
-    MatrixXf x(pc.obs_dim, n);
-    MatrixXf a(3, n);
-    for (int i = 0; i < n; ++i) {
-      normalizer.Normalize(all_obs.data() + static_cast<size_t>(i) * pc.obs_dim, x.col(i).data());
-      for (int k = 0; k < 3; ++k) a(k, i) = all_labels[3 * static_cast<size_t>(i) + k];
-    }
-    std::vector<int> order(n);
-    std::iota(order.begin(), order.end(), 0);
-    Rng shuffle(o.seed * 7919ULL + static_cast<uint64_t>(round));
-    PolicyEvalCache cache;
-    VectorXf grad(model.num_params());
-    double last_nll = 0.0;
-    for (int epoch = 0; epoch < o.epochs; ++epoch) {
-      for (int i = n - 1; i > 0; --i) std::swap(order[i], order[shuffle.UniformInt(i + 1)]);
-      double nll = 0.0;
-      for (int start = 0; start < n; start += o.minibatch) {
-        const int b = std::min(o.minibatch, n - start);
-        MatrixXf xb(pc.obs_dim, b), ab(3, b);
-        VectorXf w(b);
-        for (int k = 0; k < b; ++k) {
-          xb.col(k) = x.col(order[start + k]);
-          ab.col(k) = a.col(order[start + k]);
-          w[k] = all_changes[order[start + k]] ? static_cast<float>(o.switch_weight) : 1.0f;
-        }
-        model.Evaluate(model.params().data(), xb, ab, &cache);
-        nll -= cache.log_prob.sum();
-        grad.setZero();
-        // Ascend the weighted mean log-likelihood: Adam descends -grad.
-        const VectorXf dlogp = -w / w.sum();
-        model.Backward(model.params().data(), dlogp, VectorXf::Zero(b), VectorXf::Zero(b), &cache,
-                       grad.data());
-        grad.array() *= model.trainable_mask().array();
-        adam.Step(model.params(), grad, o.learning_rate);
-      }
-      last_nll = nll / n;
-    }
+    const double last_nll = FitRound(data, pc, norm, o, round, &model, &adam, &stats);
     // Exploration for PPO: the target head's spread set to target_log_std.
     if (pc.std_mode == StdMode::kTrained) {
       for (int k = 0; k < pc.act_dim; ++k) {
@@ -239,49 +311,26 @@ CloneResult CloneMeta(const TaskEnvConfig& config, const std::vector<FrozenPolic
     }
     export_weights();
 
-    // --- how well the clone matches the labels (deterministic actions) ---
-    PolicyRunner runner(pc, norm);
-    runner.LoadWeights(weights);
-    runner.set_update_obs_stats(false);
-    Rng unused(0);
-    std::vector<float> act(3);
-    int right = 0, walk_n = 0, changes = 0, changes_right = 0;
-    std::vector<double> target_err;
-    for (int i = 0; i < n; ++i) {
-      runner.Act(all_obs.data() + static_cast<size_t>(i) * pc.obs_dim, unused, true, nullptr,
-                 act.data());
-      const bool ok = static_cast<int>(std::lround(act[0])) == static_cast<int>(a(0, i));
-      right += ok;
-      changes += all_changes[i];
-      changes_right += all_changes[i] && ok;
-      if (static_cast<int>(a(0, i)) == pc.target_choice) {
-        ++walk_n;
-        const double ex = a(2, i) * std::cos(a(1, i)), ey = a(2, i) * std::sin(a(1, i));
-        const double cx = act[2] * std::cos(act[1]), cy = act[2] * std::sin(act[1]);
-        target_err.push_back(std::hypot(ex - cx, ey - cy));
-      }
-    }
-    const double acc = static_cast<double>(right) / n;
-    rounds.push_back(
-        {{"round", round + 1},
-         {"episodes", o.episodes},
-         {"planner_acts_prob", beta},
-         {"success_rate", static_cast<double>(successes) / o.episodes},
-         {"meta_steps", steps},
-         {"samples_total", n},
-         {"nll_last_epoch", last_nll},
-         {"switch_accuracy", acc},
-         {"handover_samples", changes},
-         {"handover_accuracy", changes ? static_cast<double>(changes_right) / changes : 0.0},
-         {"walk_target_err_m_mean", MeanOf(target_err)},
-         {"walk_samples", walk_n}});
+    const CloneScore score = ScoreClone(data, pc, norm, weights);
+    rounds.push_back({{"round", round + 1},
+                      {"episodes", o.episodes},
+                      {"planner_acts_prob", beta},
+                      {"success_rate", static_cast<double>(successes) / o.episodes},
+                      {"meta_steps", steps},
+                      {"samples_total", n},
+                      {"nll_last_epoch", last_nll},
+                      {"switch_accuracy", score.accuracy},
+                      {"handover_samples", score.handovers},
+                      {"handover_accuracy", score.handover_accuracy},
+                      {"walk_target_err_m_mean", score.target_err_m},
+                      {"walk_samples", score.walk_samples}});
     if (o.progress) {
       o.progress("meta-clone: round " + std::to_string(round + 1) + " fitted: switch accuracy " +
-                 std::to_string(acc) + " (hand-overs " +
-                 std::to_string(changes ? static_cast<double>(changes_right) / changes : 0.0) +
-                 " of " + std::to_string(changes) + "), walk target error " +
-                 std::to_string(MeanOf(target_err)) + " m (mean over " + std::to_string(walk_n) +
-                 ")");
+                 std::to_string(score.accuracy) + " (hand-overs " +
+                 std::to_string(score.handover_accuracy) + " of " +
+                 std::to_string(score.handovers) + "), walk target error " +
+                 std::to_string(score.target_err_m) + " m (mean over " +
+                 std::to_string(score.walk_samples) + ")");
     }
   }
   CloneResult r;
