@@ -290,67 +290,59 @@ Eigen::MatrixXd World::InverseJointInertia(HumanoidState s) {
 
 World::~World() = default;
 
-void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
-  scene_.reset();  // destroy the old world before building the new one
-  root_force_.setZero();
-  scene_ = std::make_unique<Scene>(config_.collision_pool_size);
-  Scene& sc = *scene_;
-  sc.world.setGravity(btVector3(0, 0, -config_.gravity));
-  btContactSolverInfo& info = sc.world.getSolverInfo();
-  info.m_numIterations = config_.solver_iterations;
-  info.m_erp2 = config_.contact_erp;
-
+void World::AddFloor(Scene& sc) {
   // Floor: the plane z = 0, with finite or (0) infinite broadphase bounds.
-  {
-    btCollisionShape* shape = config_.floor_half_extent > 0.0
-                                  ? sc.Keep(new FloorShape(config_.floor_half_extent))
-                                  : sc.Keep(new btStaticPlaneShape(btVector3(0, 0, 1), 0));
-    btRigidBody::btRigidBodyConstructionInfo ci(0, nullptr, shape);
-    auto* floor = new btRigidBody(ci);
-    floor->setFriction(config_.floor_friction);
-    floor->setUserIndex(kFloor);
-    sc.objects.emplace_back(floor);
-    sc.world.addRigidBody(floor);
-  }
+  btCollisionShape* shape = config_.floor_half_extent > 0.0
+                                ? sc.Keep(new FloorShape(config_.floor_half_extent))
+                                : sc.Keep(new btStaticPlaneShape(btVector3(0, 0, 1), 0));
+  btRigidBody::btRigidBodyConstructionInfo ci(0, nullptr, shape);
+  auto* floor = new btRigidBody(ci);
+  floor->setFriction(config_.floor_friction);
+  floor->setUserIndex(kFloor);
+  sc.objects.emplace_back(floor);
+  sc.world.addRigidBody(floor);
+}
 
+void World::AddChair(Scene& sc, const ChairState* chair_state) {
   // Chair: one rigid body with a compound of boxes, frame at its com.
-  if (chair_) {
-    auto* compound = new btCompoundShape();
-    sc.Keep(compound);
-    for (const ChairBox& b : chair_->boxes) {
-      auto* box = sc.Keep(new btBoxShape(Bt(b.half_extents())));
-      compound->addChildShape(
-          btTransform(btQuaternion::getIdentity(), Bt(b.center() - chair_->com)), box);
-    }
-    const bool dynamic = chair_->dynamic && config_.chair_body != ChairBody::kStatic;
-    const double mass = dynamic ? chair_->mass : 0.0;
-    btVector3 inertia = dynamic ? Bt(chair_->inertia) : btVector3(0, 0, 0);
-    btRigidBody::btRigidBodyConstructionInfo ci(mass, nullptr, compound, inertia);
-    ci.m_friction = config_.chair_friction;
-    auto* rb = new btRigidBody(ci);
-    Eigen::Isometry3d frame = placement_.Transform();
-    if (chair_state) {
-      frame = Eigen::Isometry3d::Identity();
-      frame.translate(chair_state->pos);
-      frame.rotate(chair_state->quat.normalized());
-    }
-    rb->setWorldTransform(Bt(frame * Translation(chair_->com)));
-    bool moving = false;
-    if (dynamic && chair_state) {
-      rb->setLinearVelocity(Bt(chair_state->lin_vel));
-      rb->setAngularVelocity(Bt(chair_state->ang_vel));
-      moving = !chair_state->lin_vel.isZero(0.0) || !chair_state->ang_vel.isZero(0.0);
-    }
-    // Sleeping: Bullet wakes the chair when a body's bounds overlap it (they share an island).
-    const bool sleeping = dynamic && config_.chair_body == ChairBody::kSleeping;
-    if (!sleeping) rb->setActivationState(DISABLE_DEACTIVATION);
-    rb->setUserIndex(kChair);
-    sc.chair = rb;
-    sc.objects.emplace_back(rb);
-    sc.world.addRigidBody(rb);  // makes a static body ISLAND_SLEEPING
-    if (sleeping && !moving) rb->setActivationState(ISLAND_SLEEPING);
+  if (!chair_) return;
+  auto* compound = new btCompoundShape();
+  sc.Keep(compound);
+  for (const ChairBox& b : chair_->boxes) {
+    auto* box = sc.Keep(new btBoxShape(Bt(b.half_extents())));
+    compound->addChildShape(btTransform(btQuaternion::getIdentity(), Bt(b.center() - chair_->com)),
+                            box);
   }
+  const bool dynamic = chair_->dynamic && config_.chair_body != ChairBody::kStatic;
+  const double mass = dynamic ? chair_->mass : 0.0;
+  btVector3 inertia = dynamic ? Bt(chair_->inertia) : btVector3(0, 0, 0);
+  btRigidBody::btRigidBodyConstructionInfo ci(mass, nullptr, compound, inertia);
+  ci.m_friction = config_.chair_friction;
+  auto* rb = new btRigidBody(ci);
+  Eigen::Isometry3d frame = placement_.Transform();
+  if (chair_state) {
+    frame = Eigen::Isometry3d::Identity();
+    frame.translate(chair_state->pos);
+    frame.rotate(chair_state->quat.normalized());
+  }
+  rb->setWorldTransform(Bt(frame * Translation(chair_->com)));
+  bool moving = false;
+  if (dynamic && chair_state) {
+    rb->setLinearVelocity(Bt(chair_state->lin_vel));
+    rb->setAngularVelocity(Bt(chair_state->ang_vel));
+    moving = !chair_state->lin_vel.isZero(0.0) || !chair_state->ang_vel.isZero(0.0);
+  }
+  // Sleeping: Bullet wakes the chair when a body's bounds overlap it (they share an island).
+  const bool sleeping = dynamic && config_.chair_body == ChairBody::kSleeping;
+  if (!sleeping) rb->setActivationState(DISABLE_DEACTIVATION);
+  rb->setUserIndex(kChair);
+  sc.chair = rb;
+  sc.objects.emplace_back(rb);
+  sc.world.addRigidBody(rb);  // makes a static body ISLAND_SLEEPING
+  if (sleeping && !moving) rb->setActivationState(ISLAND_SLEEPING);
+}
 
+void World::BuildHumanoid(Scene& sc) {
   // Humanoid: link order = bodies in file order, each body's hinges in application order.
   const int nb = model_.num_bodies();
   sc.joint_link.assign(model_.num_joints(), -1);
@@ -408,7 +400,11 @@ void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
   mb->setAngularDamping(config_.angular_damping);
   mb->setMaxCoordinateVelocity(config_.max_joint_speed);
   mb->setCanSleep(false);
+}
 
+void World::PlaceHumanoid(Scene& sc, const HumanoidState& hs) {
+  btMultiBody* mb = sc.body.get();
+  const Body& root = model_.body(0);
   // Pose and velocities. Bullet's base is the torso's inertial frame.
   const Eigen::Isometry3d root_pose =
       Translation(hs.root_pos) * Eigen::Isometry3d(hs.root_quat.normalized());
@@ -422,7 +418,11 @@ void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
     mb->setJointVel(sc.joint_link[j], hs.qd[j]);
   }
   sc.world.addMultiBody(mb);
+}
 
+void World::AddColliders(Scene& sc) {
+  btMultiBody* mb = sc.body.get();
+  const int nb = model_.num_bodies();
   // Colliders: base and carrier links get the body's geoms; a lone capsule centred at the com
   // (lwaist, pelvis, thighs, shins, upper arms) is used directly, since compound shapes cost a
   // compound-compound collision algorithm per pair.
@@ -478,7 +478,10 @@ void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
       mb->getLink(l).m_collider = col;
     }
   }
+}
 
+void World::AddJointLimits(Scene& sc) {
+  btMultiBody* mb = sc.body.get();
   sc.limit_active.assign(model_.num_joints(), 0);
   for (int j = 0; j < model_.num_joints(); ++j) {
     const Joint& jt = model_.joint(j);
@@ -486,7 +489,25 @@ void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
         new btMultiBodyJointLimitConstraint(mb, sc.joint_link[j], jt.lower, jt.upper));
   }
   UpdateJointLimits();
+}
 
+void World::SetState(const HumanoidState& hs, const ChairState* chair_state) {
+  scene_.reset();  // destroy the old world before building the new one
+  root_force_.setZero();
+  scene_ = std::make_unique<Scene>(config_.collision_pool_size);
+  Scene& sc = *scene_;
+  sc.world.setGravity(btVector3(0, 0, -config_.gravity));
+  btContactSolverInfo& info = sc.world.getSolverInfo();
+  info.m_numIterations = config_.solver_iterations;
+  info.m_erp2 = config_.contact_erp;
+
+  AddFloor(sc);
+  AddChair(sc, chair_state);
+  BuildHumanoid(sc);
+  PlaceHumanoid(sc, hs);
+  AddColliders(sc);
+  AddJointLimits(sc);
+  btMultiBody* mb = sc.body.get();
   mb->forwardKinematics(sc.scratch_q, sc.scratch_m);
   mb->updateCollisionObjectWorldTransforms(sc.scratch_q, sc.scratch_m);
   // Contacts are known right after a reset, before the first step.

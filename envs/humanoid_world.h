@@ -180,6 +180,15 @@ class World {
 
  private:
   struct Scene;
+  // SetState's steps, in order, on the new scene: the floor, the chair (at its placement, or
+  // where chair_state says), the humanoid's multibody (links from the model), its pose and
+  // velocities, its colliders and its joint limits.
+  void AddFloor(Scene& sc);
+  void AddChair(Scene& sc, const ChairState* chair_state);
+  void BuildHumanoid(Scene& sc);
+  void PlaceHumanoid(Scene& sc, const HumanoidState& hs);
+  void AddColliders(Scene& sc);
+  void AddJointLimits(Scene& sc);
   void UpdateJointLimits();
   // The joint block of the free-floating inverse mass matrix in pose s [1/(kg m^2)], observation
   // order; rebuilds the world.
