@@ -78,9 +78,15 @@ ExperimentConfig LoadExperimentConfig(const std::string& path,
 }
 
 Json ToJson(const ExperimentConfig& c) {
+  // The env section resolved (every field at the value in force), as the other sections are: a
+  // run's config.json says what ran even after a default changes (the env's physics defaults did
+  // once, issue 19, and an unresolved record hid it).
+  const Json env = c.env_backend == "bullet"
+                       ? TaskEnvConfig::FromJson(c.env, c.source + ".env").ToJson()
+                       : c.env;
   Json j{{"seed", c.seed},
          {"env_backend", c.env_backend},
-         {"env", c.env},
+         {"env", env},
          {"mock_env", ToJson(c.mock_env)},
          {"policy", c.policy},
          {"ppo", ToJson(c.ppo)},

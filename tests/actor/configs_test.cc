@@ -174,6 +174,20 @@ TEST(CommittedConfigs, FieldTablesDescribeExactlyTheResolvedSections) {
   }
 }
 
+// A run records its env section resolved, as its other sections: every field at the value in
+// force, so that a later change of a default cannot hide what the run ran with.
+TEST(CommittedConfigs, TheResolvedConfigRecordsTheEnvWithEveryDefault) {
+  const std::string path = std::string(PERCH_SOURCE_DIR) + "/configs/default.json";
+  const Json raw = LoadComposedConfig(path);
+  ASSERT_FALSE(raw["env"].contains("physics"));  // the file leaves the physics to the defaults
+  const Json resolved = ToJson(LoadExperimentConfig(path));
+  EXPECT_EQ(resolved["env"], TaskEnvConfig::FromJson(raw["env"], "env").ToJson());
+  EXPECT_EQ(resolved["env"]["physics"]["chair_body"], "static");
+  EXPECT_TRUE(resolved["env"]["walk"].contains("similarity"));
+  // Read back, it is the same config.
+  EXPECT_EQ(ToJson(ExperimentConfigFromJson(resolved, "resolved")), resolved);
+}
+
 // Each task's own section (`perch config --fields TASK`): its table's rows are exactly the keys the
 // resolved section holds, with the defaults it records when the config leaves them out.
 TEST(CommittedConfigs, TaskFieldTablesDescribeExactlyTheirResolvedSections) {
