@@ -635,50 +635,40 @@ std::string FirstHeaderDifference(const Json& a, const Json& b) {
   return "";
 }
 
-Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& meta,
-                  const std::vector<FrozenPolicyData>& frozen, const MetaEvalOptions& o,
-                  MetaTrialFrames* first_success, MetaTrialFrames* first_failure) {
-  if (o.trials < 1) throw ConfigError("eval: --trials must be >= 1");
-  if (o.first_trial < 0) throw ConfigError("eval: --first-trial must be >= 0");
+namespace {
+
+// The records a resumed evaluation brings: each inside this call's trials and once; none when
+// hand-over banks are asked for (every trial must run here then).
+void CheckResumeRecords(const MetaEvalOptions& o) {
   const int end_trial = o.first_trial + o.trials;
-  {
-    std::set<int> seen;
-    for (const MetaTrialRecord& r : o.done) {
-      if (r.trial < o.first_trial || r.trial >= end_trial) {
-        throw ConfigError("eval: a record of trial " + std::to_string(r.trial) +
-                          " lies outside this evaluation's trials " +
-                          std::to_string(o.first_trial) + " .. " + std::to_string(end_trial - 1));
-      }
-      if (!seen.insert(r.trial).second) {
-        throw ConfigError("eval: trial " + std::to_string(r.trial) + " recorded twice");
-      }
+  std::set<int> seen;
+  for (const MetaTrialRecord& r : o.done) {
+    if (r.trial < o.first_trial || r.trial >= end_trial) {
+      throw ConfigError("eval: a record of trial " + std::to_string(r.trial) +
+                        " lies outside this evaluation's trials " + std::to_string(o.first_trial) +
+                        " .. " + std::to_string(end_trial - 1));
+    }
+    if (!seen.insert(r.trial).second) {
+      throw ConfigError("eval: trial " + std::to_string(r.trial) + " recorded twice");
     }
   }
   if (!o.done.empty() && (o.sit_starts != nullptr || o.failed_sit_starts != nullptr)) {
     throw ConfigError(
         "eval: hand-over banks need every trial run in this call (not resumed from records)");
   }
-  TaskEnvConfig config = config_in;
-  config.MutableSection<SitChairTaskConfig>().meta.subtask_stochastic = o.stochastic;
-  const bool planned = o.planner != nullptr;
-  const PolicyConfig pc =
-      planned ? PolicyConfig::Meta() : PolicyConfigFromShape(meta.shape(), "meta model");
-  const MetaConfig& mc = config.Section<SitChairTaskConfig>().meta;
-  const int obs_dim = mc.obs_dim();
-  if (!planned && (pc.kind != PolicyKind::kMeta || pc.obs_dim != obs_dim ||
-                   pc.num_choices != static_cast<int>(mc.choices.size()))) {
-    throw ConfigError("eval: the model is not a meta policy over this config's " +
-                      std::to_string(mc.choices.size()) + " subtask choices and " +
-                      std::to_string(obs_dim) + " inputs (kind " + meta.shape().kind() + ", " +
-                      std::to_string(pc.num_choices) + " classes, " + std::to_string(pc.obs_dim) +
-                      " inputs)");
-  }
-  const bool lookahead = planned ? o.planner->config.lookahead() : o.policy_lookahead.lookahead();
-  if (lookahead && !planned && o.stochastic) {
-    // Its rollouts take the policy's mean action: a sampling policy would not do what they show.
-    throw ConfigError("eval: a meta policy's lookahead needs its mean action (no --stochastic)");
-  }
-  auto MakeDecider = [&](Decider* d) {
+}
+
+// What decides in a trial: the meta policy or the scripted planner, alone or with a lookahead.
+// One per thread.
+struct DeciderFactory {
+  const TaskEnvConfig& config;
+  const proto::ModelWeights& meta;
+  const std::vector<FrozenPolicyData>& frozen;
+  const MetaEvalOptions& o;
+  PolicyConfig pc;
+  bool planned = false, lookahead = false;
+
+  void Make(Decider* d) const {
     if (lookahead && planned) {
       d->lookahead = std::make_unique<LookaheadPlanner>(o.planner, config, frozen);
     } else if (lookahead) {
@@ -693,18 +683,27 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
       d->runner->LoadWeights(meta);
       d->runner->set_update_obs_stats(false);
     }
-  };
-  // The trials still to run, in order.
-  std::vector<int> todo;
-  {
-    std::vector<bool> have(o.trials, false);
-    for (const MetaTrialRecord& r : o.done) have[r.trial - o.first_trial] = true;
-    for (int i = 0; i < o.trials; ++i) {
-      if (!have[i]) todo.push_back(o.first_trial + i);
-    }
   }
+};
+
+// The trials not in o.done, in order.
+std::vector<int> TrialsToRun(const MetaEvalOptions& o) {
+  std::vector<bool> have(o.trials, false);
+  for (const MetaTrialRecord& r : o.done) have[r.trial - o.first_trial] = true;
+  std::vector<int> todo;
+  for (int i = 0; i < o.trials; ++i) {
+    if (!have[i]) todo.push_back(o.first_trial + i);
+  }
+  return todo;
+}
+
+// Runs `todo` on `threads` threads (each its own env and decider), reporting each record as it
+// finishes; results in the order of `todo`.
+std::vector<TrialResult> RunTrials(const TaskEnvConfig& config,
+                                   const std::vector<FrozenPolicyData>& frozen,
+                                   const MetaEvalOptions& o, const DeciderFactory& deciders,
+                                   const std::vector<int>& todo, int threads) {
   const int n_todo = static_cast<int>(todo.size());
-  const int threads = std::clamp(o.threads, 1, std::max(1, n_todo));
   std::vector<TrialResult> results(n_todo);
   int prior_successes = 0;
   for (const MetaTrialRecord& r : o.done) prior_successes += r.success;
@@ -716,7 +715,7 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
       MetaEnv env(config);
       env.SetFrozenPolicies(frozen);
       Decider decider;
-      MakeDecider(&decider);
+      deciders.Make(&decider);
       for (int i = next++; i < n_todo; i = next++) {
         results[i] = RunTrial(env, decider, o, todo[i], nullptr);
         successes += results[i].rec.success;
@@ -739,6 +738,41 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
   }
   for (std::thread& t : pool) t.join();
   if (error) std::rethrow_exception(error);
+  return results;
+}
+
+}  // namespace
+
+Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& meta,
+                  const std::vector<FrozenPolicyData>& frozen, const MetaEvalOptions& o,
+                  MetaTrialFrames* first_success, MetaTrialFrames* first_failure) {
+  if (o.trials < 1) throw ConfigError("eval: --trials must be >= 1");
+  if (o.first_trial < 0) throw ConfigError("eval: --first-trial must be >= 0");
+  CheckResumeRecords(o);
+  TaskEnvConfig config = config_in;
+  config.MutableSection<SitChairTaskConfig>().meta.subtask_stochastic = o.stochastic;
+  const bool planned = o.planner != nullptr;
+  const PolicyConfig pc =
+      planned ? PolicyConfig::Meta() : PolicyConfigFromShape(meta.shape(), "meta model");
+  const MetaConfig& mc = config.Section<SitChairTaskConfig>().meta;
+  const int obs_dim = mc.obs_dim();
+  if (!planned && (pc.kind != PolicyKind::kMeta || pc.obs_dim != obs_dim ||
+                   pc.num_choices != static_cast<int>(mc.choices.size()))) {
+    throw ConfigError("eval: the model is not a meta policy over this config's " +
+                      std::to_string(mc.choices.size()) + " subtask choices and " +
+                      std::to_string(obs_dim) + " inputs (kind " + meta.shape().kind() + ", " +
+                      std::to_string(pc.num_choices) + " classes, " + std::to_string(pc.obs_dim) +
+                      " inputs)");
+  }
+  const bool lookahead = planned ? o.planner->config.lookahead() : o.policy_lookahead.lookahead();
+  if (lookahead && !planned && o.stochastic) {
+    // Its rollouts take the policy's mean action: a sampling policy would not do what they show.
+    throw ConfigError("eval: a meta policy's lookahead needs its mean action (no --stochastic)");
+  }
+  const DeciderFactory deciders{config, meta, frozen, o, pc, planned, lookahead};
+  const std::vector<int> todo = TrialsToRun(o);
+  const int threads = std::clamp(o.threads, 1, std::max(1, static_cast<int>(todo.size())));
+  const std::vector<TrialResult> results = RunTrials(config, frozen, o, deciders, todo, threads);
 
   std::vector<MetaTrialRecord> records = o.done;
   for (const TrialResult& r : results) records.push_back(r.rec);
@@ -766,7 +800,7 @@ Json EvaluateMeta(const TaskEnvConfig& config_in, const proto::ModelWeights& met
       MetaEnv env(config);
       env.SetFrozenPolicies(frozen);
       Decider d;
-      MakeDecider(&d);
+      deciders.Make(&d);
       out->trial = r.trial;
       out->success = want_success;
       RunTrial(env, d, o, r.trial, &out->frames);
