@@ -1,5 +1,5 @@
-// perch recipe run / status: a training recipe from an empty directory to a delivered hierarchy
-// (recipe/runner.h, docs/recipe.md).
+// perch recipe run / status / worker: a training recipe from an empty directory to a delivered
+// hierarchy (recipe/runner.h, docs/recipe.md).
 #include <atomic>
 #include <iostream>
 #include <memory>
@@ -46,12 +46,39 @@ void RegisterRecipeCommands(CLI::App& root, CLI::App& /*bench*/) {
   run->add_option("--rollout-port", f->rollout_port, "--cluster: rollout port");
   run->add_option("--weights-port", f->weights_port, "--cluster: weights port");
   run->add_option("--metrics-port", f->metrics_port, "--cluster: Prometheus port");
+  run->add_option("--local-shards", f->local_shards,
+                  "sharded eval stages: 1, this runner runs shards too; 0, only `perch recipe "
+                  "worker` processes sharing --dir do")
+      ->check(CLI::Range(0, 1));
   run->add_flag("--check-config", f->check,
                 "read the recipe and the state, say what would run, and exit (manifest checks)");
   run->callback([f] {
     InstallStopHandlers();
     f->stop = &StopFlag();
     const int code = RunRecipe(*f);
+    if (code != 0) std::exit(code);
+  });
+
+  auto w = std::make_shared<RecipeWorkerFlags>();
+  auto w_check = std::make_shared<bool>(false);
+  CLI::App* worker = recipe->add_subcommand(
+      "worker",
+      "Take the shards of the sharded evaluation stages of a recipe running in --dir (another "
+      "machine sharing the directory; k8s/recipe-eval-workers.yaml)");
+  worker->add_option("--dir", w->dir, "the recipe's directory (shared)")->required();
+  worker
+      ->add_option("--exit-when-idle-s", w->exit_when_idle_s,
+                   "exit after this many seconds without a shard to run (0: never)")
+      ->check(CLI::NonNegativeNumber);
+  worker->add_flag("--check-config", *w_check, "check the flags and exit (manifest checks)");
+  worker->callback([w, w_check] {
+    if (*w_check) {
+      std::cerr << "perch recipe worker: OK (--dir " << w->dir << ")\n";
+      return;
+    }
+    InstallStopHandlers();
+    w->stop = &StopFlag();
+    const int code = RunRecipeWorker(*w);
     if (code != 0) std::exit(code);
   });
 

@@ -75,7 +75,8 @@ RecipeStage StageFromJson(const Json& j, const std::string& ctx) {
                      "config",     "set",         "args",           "counts",
                      "min_count",  "max_samples", "target_success", "target_window",
                      "actors",     "select",      "outputs",        "figures",
-                     "est_wall_s", "toy_args",    "toy_set",        "optional_outputs"},
+                     "est_wall_s", "toy_args",    "toy_set",        "optional_outputs",
+                     "shards"},
                  ctx);
   RecipeStage s;
   GetRequired(j, "name", s.name, ctx);
@@ -109,6 +110,20 @@ RecipeStage StageFromJson(const Json& j, const std::string& ctx) {
   GetOptional(j, "optional_outputs", s.optional_outputs, c);
   GetOptional(j, "figures", s.figures, c);
   GetOptional(j, "est_wall_s", s.est_wall_s, c);
+  GetOptional(j, "shards", s.shards, c);
+  if (s.shards < 1 || s.shards > 1000) throw ConfigError(c + ".shards: must be in 1..1000");
+  if (s.shards > 1) {
+    if (s.kind != "eval" || !s.counts.count("--trials")) {
+      throw ConfigError(c +
+                        ".shards: only an eval stage of --trials (perch eval --task "
+                        "sit_chair) runs in shards");
+    }
+    if (!s.outputs.empty()) {
+      throw ConfigError(c +
+                        ".shards: a sharded evaluation writes only its result (a hand-over "
+                        "bank needs every trial in one run)");
+    }
+  }
   for (const auto& [flag, n] : s.counts) {
     if (flag.rfind("--", 0) != 0)
       throw ConfigError(c + ".counts: \"" + flag + "\" is not a --flag");
@@ -167,6 +182,15 @@ std::vector<std::string> AllRefStrings(const RecipeStage& s) {
 }
 
 }  // namespace
+
+std::vector<TrialShard> TrialShards(int64_t trials, int shards) {
+  std::vector<TrialShard> out;
+  for (int k = 0; k < shards; ++k) {
+    const int64_t a = trials * k / shards, b = trials * (k + 1) / shards;
+    if (b > a) out.push_back(TrialShard{k, a, b - a});
+  }
+  return out;
+}
 
 std::vector<std::string> SelectionCandidates(const std::vector<std::string>& checkpoints,
                                              const StageSelect& select) {

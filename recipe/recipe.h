@@ -73,9 +73,21 @@ struct RecipeStage {
   std::vector<std::string> optional_outputs;
   // Figures copied from the stage's JSON result (eval: perch eval --json; clone: its summary).
   std::vector<std::string> figures;
-  double est_wall_s = 0.0;        // full-scale wall time on 2 cores, for the recipe's ETA
+  double est_wall_s = 0.0;  // full-scale wall time on 2 cores, for the recipe's ETA
+  // An eval stage of --trials (perch eval --task sit_chair) runs as this many shards of
+  // consecutive trials (--first-trial, --records), which `perch recipe worker` processes on other
+  // machines may take, merged by perch eval-merge. The merged result is the one an unsharded run
+  // gives, so it is not in the fingerprint (as actors).
+  int shards = 1;
   std::vector<std::string> deps;  // derived from the references, in stage order
 };
+
+// Shard k of `trials` split `shards` ways: its first trial and count; empty shards left out.
+struct TrialShard {
+  int index = 0;
+  int64_t first = 0, count = 0;
+};
+std::vector<TrialShard> TrialShards(int64_t trials, int shards);
 
 struct Recipe {
   std::string path;  // the file it was read from

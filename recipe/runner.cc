@@ -3,12 +3,15 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
@@ -168,6 +171,92 @@ struct Live {
   std::atomic<int> code{0};  // 0 done, 1 failed, 130 stopped
 };
 
+// ---- eval shards: a file-claim queue in the stage's shards/ directory ---------------------------
+// plan.json lists each shard's perch eval arguments and files; a shard is done when its result
+// (its --json) is there; whoever runs it holds shard-K.claim ("host pid"), touched every few
+// seconds. The runner and any `perch recipe worker` on the same directory take shards from it.
+
+std::string HostName() {
+  char h[256] = {0};
+  if (gethostname(h, sizeof(h) - 1) != 0) return "host";
+  return h;
+}
+
+std::string ClaimOwner() { return HostName() + " " + std::to_string(getpid()); }
+
+// A claim is stale when its holder stopped touching it (stale_s), or on this host its process is
+// gone (a killed runner's shard is taken over at once).
+bool StaleClaim(const std::string& claim, double stale_s) {
+  struct stat st;
+  if (stat(claim.c_str(), &st) != 0) return false;
+  if (std::difftime(std::time(nullptr), st.st_mtime) > stale_s) return true;
+  std::istringstream in(ReadFileBytes(claim));
+  std::string host;
+  long pid = 0;
+  if (!(in >> host >> pid)) return false;
+  return host == HostName() && pid > 0 && kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH;
+}
+
+// Takes a shard: creates its claim exclusively, or takes over a stale one.
+bool TryClaim(const std::string& claim, double stale_s) {
+  int fd = open(claim.c_str(), O_CREAT | O_EXCL | O_WRONLY, 0644);
+  if (fd < 0 && errno == EEXIST && StaleClaim(claim, stale_s)) {
+    const std::string aside = claim + ".stale-" + std::to_string(getpid());
+    if (rename(claim.c_str(), aside.c_str()) != 0) return false;  // another one took it over
+    unlink(aside.c_str());
+    fd = open(claim.c_str(), O_CREAT | O_EXCL | O_WRONLY, 0644);
+  }
+  if (fd < 0) return false;
+  const std::string who = ClaimOwner() + "\n";
+  const bool ok = write(fd, who.data(), who.size()) == static_cast<ssize_t>(who.size());
+  close(fd);
+  return ok;
+}
+
+void TouchClaim(const std::string& claim) { utimensat(AT_FDCWD, claim.c_str(), nullptr, 0); }
+
+constexpr double kClaimStaleS = 60.0;
+
+// Runs one shard of a plan (`exe` its perch): its result committed when it succeeds, and
+// shard-K.ran-by naming who ran it. False when stopped or failed (status in *status).
+bool RunClaimedShard(const std::string& exe, const Json& shard, const std::string& log,
+                     const std::string& claim, const std::atomic<bool>* stop, int* status) {
+  std::vector<std::string> argv = {exe};
+  for (const Json& a : shard["args"]) argv.push_back(a.get<std::string>());
+  const std::string result = shard["result"].get<std::string>();
+  {
+    std::ofstream l(log, std::ios::app);
+    l << "\n== " << UtcStamp() << " perch recipe (shard " << shard["index"].get<int>() << ", "
+      << ClaimOwner() << "):";
+    for (const std::string& a : argv) l << " " << a;
+    l << "\n";
+  }
+  const pid_t pid = Spawn(argv, log, result + ".tmp");
+  double since_touch = 0;
+  for (;;) {
+    if (WaitFor(pid, 0.5, status)) break;
+    since_touch += 0.5;
+    if (since_touch >= 5) {
+      TouchClaim(claim);
+      since_touch = 0;
+    }
+    if (stop != nullptr && stop->load()) {
+      *status = Stop(pid, 10.0);
+      return false;
+    }
+  }
+  if (!WIFEXITED(*status) || WEXITSTATUS(*status) != 0) return false;
+  CommitFileAtomic(result + ".tmp", result);
+  WriteFileAtomic(result.substr(0, result.size() - 5) + ".ran-by", ClaimOwner() + "\n");
+  std::remove(claim.c_str());
+  return true;
+}
+
+std::string ClaimOf(const Json& shard) {
+  const std::string r = shard["result"].get<std::string>();
+  return r.substr(0, r.size() - 5) + ".claim";  // shard-K.json -> shard-K.claim
+}
+
 class Runner {
  public:
   Runner(const RecipeRunFlags& f, Recipe r) : f_(f), r_(std::move(r)) {
@@ -241,6 +330,9 @@ class Runner {
   int ReapFinished(std::map<std::string, std::thread>* threads, int code);
   void MoveAside(const std::vector<std::string>& names);
   void Other(const RecipeStage& s, Live* live, StageRecord* rec);
+  // A sharded eval stage: its plan, its shards (here and by workers), their merge.
+  void RunShards(const RecipeStage& s, const std::vector<std::string>& argv, Live* live,
+                 StageRecord* rec);
 
   RecipeRunFlags f_;
   Recipe r_;
@@ -500,6 +592,10 @@ void Runner::Other(const RecipeStage& s, Live* live, StageRecord* rec) {
     argv.push_back(flag);
     argv.push_back(std::to_string(n));
   }
+  if (s.kind == "eval" && s.shards > 1) {
+    RunShards(s, argv, live, rec);
+    return;
+  }
   std::string stdout_path;
   const auto own_out = [&](const char* flag, const std::string& name) {
     // The kind's output flag, unless the stage's args already name it.
@@ -548,6 +644,100 @@ void Runner::Other(const RecipeStage& s, Live* live, StageRecord* rec) {
     rec->figures = FiguresOf(result, s.figures);
     fs::remove(stdout_path, ec);
   }
+}
+
+void Runner::RunShards(const RecipeStage& s, const std::vector<std::string>& argv, Live* live,
+                       StageRecord* rec) {
+  const std::string sd = StageDir(s.name);
+  const std::string log = sd + "/stage.log";
+  const std::string shard_dir = sd + "/shards";
+  std::error_code ec;
+  fs::create_directories(shard_dir, ec);
+  // The plan: the stage's perch eval without --trials, each shard with its trials and records.
+  std::vector<std::string> base;
+  int64_t trials = 0;
+  for (size_t i = 1; i < argv.size(); ++i) {
+    if (argv[i] == "--trials" && i + 1 < argv.size()) {
+      trials = std::stoll(argv[++i]);
+      continue;
+    }
+    base.push_back(argv[i]);
+  }
+  Json shards = Json::array();
+  std::vector<std::string> records;
+  for (const TrialShard& t : TrialShards(trials, s.shards)) {
+    const std::string stem = shard_dir + "/shard-" + std::to_string(t.index);
+    std::vector<std::string> a = base;
+    a.insert(a.end(), {"--first-trial", std::to_string(t.first), "--trials",
+                       std::to_string(t.count), "--records", stem + ".jsonl", "--json"});
+    shards.push_back(Json{{"index", t.index}, {"args", a}, {"result", stem + ".json"}});
+    records.push_back(stem + ".jsonl");
+  }
+  WriteFileAtomic(shard_dir + "/plan.json",
+                  Json{{"stage", s.name}, {"log", log}, {"shards", shards}}.dump(2) + "\n");
+  // Take shards here (unless --local-shards 0) while workers take others; wait for the rest.
+  for (;;) {
+    if (f_.stop && f_.stop->load()) {
+      live->code = 130;
+      return;
+    }
+    int done = 0;
+    const Json* mine = nullptr;
+    for (const Json& sh : shards) {
+      if (fs::exists(sh["result"].get<std::string>())) {
+        ++done;
+      } else if (mine == nullptr && f_.local_shards > 0 && TryClaim(ClaimOf(sh), kClaimStaleS)) {
+        mine = &sh;
+      }
+    }
+    {
+      std::lock_guard<std::mutex> g(mu_);
+      live->phase = "shards: " + std::to_string(done) + " of " + std::to_string(shards.size()) +
+                    " done" + (mine ? ", running shard " + (*mine)["index"].dump() : "");
+    }
+    if (done == static_cast<int>(shards.size())) break;
+    if (mine == nullptr) {
+      std::this_thread::sleep_for(std::chrono::seconds(1));
+      continue;
+    }
+    int status = 0;
+    if (!RunClaimedShard(exe_, *mine, log, ClaimOf(*mine), f_.stop, &status)) {
+      if (f_.stop && f_.stop->load()) {
+        live->code = 130;
+        return;
+      }
+      std::remove(ClaimOf(*mine).c_str());
+      throw std::runtime_error("perch eval (shard " + (*mine)["index"].dump() + ") " +
+                               DescribeStatus(status) + "; " + log + ":\n" + LastLines(log, 15));
+    }
+  }
+  // The merge: the JSON one evaluation of all the trials gives.
+  std::vector<std::string> merge = {exe_, "eval-merge"};
+  merge.insert(merge.end(), records.begin(), records.end());
+  merge.push_back("--json");
+  const std::string out = sd + "/result.json.tmp";
+  int status = 0;
+  if (!RunChild(merge, log, out, live, "", &status)) {
+    live->code = 130;
+    return;
+  }
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+    throw std::runtime_error("perch eval-merge " + DescribeStatus(status) + "; " + log + ":\n" +
+                             LastLines(log, 15));
+  }
+  Json result;
+  std::istringstream in(ReadFileBytes(out));
+  for (std::string l; std::getline(in, l);) {
+    if (!l.empty() && l[0] == '{') {
+      const Json j = Json::parse(l, nullptr, false);
+      if (j.is_object()) result = j;
+    }
+  }
+  if (!result.is_object()) throw std::runtime_error("perch eval-merge printed no JSON result");
+  result["shards"] = static_cast<int>(shards.size());
+  WriteFileAtomic(sd + "/" + StageOutputs(s).at("result"), result.dump(2) + "\n");
+  rec->figures = FiguresOf(result, s.figures);
+  fs::remove(out, ec);
 }
 
 void Runner::RunStage(const RecipeStage& st, Live* live) {
@@ -1063,6 +1253,57 @@ std::string RecipeStatusText(const Json& s) {
     << Duration(s.value("total_wall_s", 0.0)) << " of stage wall time";
   o << "   (* interrupted: the same `perch recipe run` continues it)\n";
   return o.str();
+}
+
+int RunRecipeWorker(const RecipeWorkerFlags& f) {
+  const std::string exe = f.exe.empty() ? SelfExe() : f.exe;
+  if (!fs::is_directory(f.dir)) throw ConfigError("--dir " + f.dir + ": no such directory");
+  std::cerr << "[recipe worker] " << ClaimOwner() << " takes evaluation shards in " << f.dir
+            << "\n";
+  auto idle_since = std::chrono::steady_clock::now();
+  int ran = 0;
+  for (;;) {
+    if (f.stop && f.stop->load()) return 130;
+    bool worked = false;
+    std::error_code ec;
+    for (fs::directory_iterator it(f.dir, ec), e; !ec && it != e; it.increment(ec)) {
+      const std::string plan_path = it->path().string() + "/shards/plan.json";
+      if (!fs::exists(plan_path)) continue;
+      Json plan;
+      try {
+        plan = LoadJsonFile(plan_path);
+      } catch (const ConfigError&) {
+        continue;  // being written
+      }
+      for (const Json& sh : plan["shards"]) {
+        if (fs::exists(sh["result"].get<std::string>())) continue;
+        if (!TryClaim(ClaimOf(sh), kClaimStaleS)) continue;
+        std::cerr << "[recipe worker] " << plan["stage"].get<std::string>() << ": shard "
+                  << sh["index"].get<int>() << "\n";
+        int status = 0;
+        const bool ok =
+            RunClaimedShard(exe, sh, plan["log"].get<std::string>(), ClaimOf(sh), f.stop, &status);
+        if (!ok) {
+          std::remove(ClaimOf(sh).c_str());
+          if (f.stop && f.stop->load()) return 130;
+          std::cerr << "[recipe worker] shard " << sh["index"].get<int>() << " "
+                    << DescribeStatus(status) << " (" << plan["log"].get<std::string>() << ")\n";
+        } else {
+          ++ran;
+        }
+        worked = true;
+      }
+    }
+    const auto now = std::chrono::steady_clock::now();
+    if (worked) idle_since = now;
+    if (f.exit_when_idle_s > 0 &&
+        std::chrono::duration<double>(now - idle_since).count() >= f.exit_when_idle_s) {
+      std::cerr << "[recipe worker] idle for " << f.exit_when_idle_s << " s; ran " << ran
+                << " shard(s)\n";
+      return 0;
+    }
+    if (!worked) std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  }
 }
 
 }  // namespace perch

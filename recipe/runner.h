@@ -31,7 +31,22 @@ struct RecipeRunFlags {
   std::string bind = "0.0.0.0";
   int rollout_port = 5555, weights_port = 5556, metrics_port = 9100;
   std::atomic<bool>* stop = nullptr;  // set by a signal: stop children, keep what is saved
+  // Sharded eval stages: 1, the runner takes shards itself as well; 0, only `perch recipe
+  // worker` processes do (on other machines sharing D).
+  int local_shards = 1;
 };
+
+// `perch recipe worker --dir D`: takes the shards of D's sharded eval stages while they run
+// (a shard claimed by a file in the stage's shards/, touched while it runs; a stale claim is
+// taken over), runs each with its perch eval, and exits after exit_when_idle_s with nothing to
+// do (0: never). Returns 0, or 130 when stopped.
+struct RecipeWorkerFlags {
+  std::string dir;
+  double exit_when_idle_s = 0.0;
+  std::string exe;  // the perch program (default: this one)
+  std::atomic<bool>* stop = nullptr;
+};
+int RunRecipeWorker(const RecipeWorkerFlags& f);
 
 // Returns the exit code: 0 all stages in range done, 1 a stage failed (named on stderr with its
 // log's last lines), 130 stopped by a signal. ConfigError for a bad recipe, a changed stage

@@ -70,5 +70,26 @@ TEST(K8sManifests, EvalShardsCoverTheTrialsOnceEach) {
       yaml, std::regex("kind: PersistentVolumeClaim\\s+metadata:\\s+name: " + std::string(m[1]))));
 }
 
+// The recipe's evaluation workers mount the recipe pod's own volume (its StatefulSet's claim,
+// ReadWriteMany) and take shards from the recipe's --dir.
+TEST(K8sManifests, RecipeEvalWorkersShareTheRecipesDirectory) {
+  const std::string recipe = Read("k8s/recipe.yaml");
+  const std::string workers = Read("k8s/recipe-eval-workers.yaml");
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(recipe, m, std::regex(R"re("--dir", "(\S+)")re")));
+  const std::string dir = m[1];
+  EXPECT_NE(workers.find("\"worker\", \"--dir\", \"" + dir + "\""), std::string::npos) << dir;
+  ASSERT_TRUE(std::regex_search(
+      recipe, m, std::regex(R"re(kind: StatefulSet\s+metadata:\s+name: (\S+))re")));
+  const std::string set = m[1];
+  ASSERT_TRUE(std::regex_search(
+      recipe, m, std::regex(R"re(volumeClaimTemplates:\s+- metadata:\s+name: (\S+))re")));
+  EXPECT_NE(workers.find("claimName: " + std::string(m[1]) + "-" + set + "-0"), std::string::npos);
+  EXPECT_NE(recipe.find("accessModes: [\"ReadWriteMany\"]"), std::string::npos);
+  // Both mount it where the recipe's directory is.
+  const std::string top = dir.substr(0, dir.find('/', 1));
+  EXPECT_NE(workers.find("mountPath: " + top), std::string::npos) << top;
+}
+
 }  // namespace
 }  // namespace perch

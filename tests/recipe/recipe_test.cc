@@ -166,6 +166,44 @@ TEST(Recipe, SelectionSearchesTheMilestonesWhenAsked) {
   EXPECT_NE(ErrorOf(r).find(".milestones: needs last_k >= 1"), std::string::npos) << ErrorOf(r);
 }
 
+// Sharded evaluations: consecutive trials per shard, none twice, none left out; only an eval
+// stage of trials with no output but its result; and the shard count is not in the fingerprint
+// (the merged result is the unsharded one).
+TEST(Recipe, EvaluationShardsCoverEveryTrialOnce) {
+  for (const auto& [trials, shards] : std::vector<std::pair<int64_t, int>>{
+           {1000, 4}, {1000, 7}, {3, 4}, {1, 4}, {10, 1}}) {
+    const std::vector<TrialShard> t = TrialShards(trials, shards);
+    int64_t next = 0;
+    for (const TrialShard& s : t) {
+      EXPECT_EQ(s.first, next);
+      EXPECT_GT(s.count, 0);
+      next += s.count;
+    }
+    EXPECT_EQ(next, trials);
+    EXPECT_LE(static_cast<int>(t.size()), shards);
+  }
+  EXPECT_EQ(TrialShards(3, 4).size(), 3u);  // an empty shard is left out
+  Json r = ThreeStages();
+  r["stages"][3]["counts"] = {{"--trials", 1000}};
+  r["stages"][3]["shards"] = 4;
+  const Recipe sharded = RecipeFromJson(r, "r.json");
+  EXPECT_EQ(sharded.stages[3].shards, 4);
+  r["stages"][3]["shards"] = 1;
+  RecipeRunOptions o;
+  EXPECT_EQ(StageFingerprint(ScaledStage(sharded.stages[3], o), Json(), {}),
+            StageFingerprint(ScaledStage(RecipeFromJson(r, "r.json").stages[3], o), Json(), {}));
+  r["stages"][3]["shards"] = 4;
+  r["stages"][3]["outputs"] = {{"bank", "bank.bin"}};
+  EXPECT_NE(ErrorOf(r).find(".shards: a sharded evaluation writes only its result"),
+            std::string::npos)
+      << ErrorOf(r);
+  r["stages"][3].erase("outputs");
+  r["stages"][3]["counts"] = {{"--episodes", 10}};
+  EXPECT_NE(ErrorOf(r).find(".shards: only an eval stage of --trials"), std::string::npos);
+  r["stages"][3]["shards"] = 0;
+  EXPECT_NE(ErrorOf(r).find(".shards: must be in 1..1000"), std::string::npos);
+}
+
 TEST(Recipe, ChangeInvalidatesTheStageAndItsReaders) {
   const Recipe r = RecipeFromJson(ThreeStages(), "r.json");
   RecipeState st;

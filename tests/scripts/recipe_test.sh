@@ -214,10 +214,41 @@ if "$bin" recipe run recipes/sit_chair.json --dir "$B" --actors 1 --scale 0.0001
   fail "a changed output was accepted"
 fi
 grep -q "eval_meta_zone3: output result" "$tmp/o.log" || fail "the refusal does not name the output: $(cat "$tmp/o.log")"
-# --force-from redoes that stage (and only what follows it), moving its old files aside.
-"$bin" recipe run recipes/sit_chair.json --dir "$B" --actors 1 --scale 0.0001 \
+# The sharded evaluations (recipes/sit_chair.json: eval_meta_* in 4 shards) ran here in B:
+# every shard's records merged into the stage's result, as many trials as one run.
+python3 - "$B" << 'PY' || fail "B: sharded evaluation"
+import glob, json, os, sys
+d = sys.argv[1]
+for st in ("eval_meta_zone1", "eval_meta_zone2", "eval_meta_zone3"):
+    plan = json.load(open(os.path.join(d, st, "shards", "plan.json")))
+    result = json.load(open(os.path.join(d, st, "eval.json")))
+    trials = sum(int(s["args"][s["args"].index("--trials") + 1]) for s in plan["shards"])
+    assert len(plan["shards"]) >= 2, plan
+    assert result["shards"] == len(plan["shards"]) and result["trials"] == trials, (st, result)
+    for s in plan["shards"]:
+        assert os.path.exists(s["result"]), s
+PY
+# --force-from redoes that stage (and only what follows it), moving its old files aside. Here
+# its shards are taken only by a worker in another process (--local-shards 0), as a worker pod
+# sharing the directory would (k8s/recipe-eval-workers.yaml).
+"$bin" recipe worker --dir "$B" --exit-when-idle-s 20 > "$tmp/worker.log" 2>&1 &
+worker=$!
+"$bin" recipe run recipes/sit_chair.json --dir "$B" --actors 1 --scale 0.0001 --local-shards 0 \
   --force-from eval_meta_zone3 > "$tmp/f.log" 2>&1 || fail "--force-from: $(tail -20 "$tmp/f.log")"
+wait $worker || fail "the worker failed: $(tail -20 "$tmp/worker.log")"
 ls "$B"/superseded/*/eval_meta_zone3/eval.json > /dev/null || fail "the old files were not kept"
+python3 - "$B" "$worker" "$tmp/keep.json" << 'PY' || fail "worker shards: $(cat "$tmp/worker.log")"
+import json, os, sys
+d, worker, before = sys.argv[1], sys.argv[2], sys.argv[3]
+plan = json.load(open(os.path.join(d, "eval_meta_zone3", "shards", "plan.json")))
+for s in plan["shards"]:
+    ran_by = open(s["result"][:-5] + ".ran-by").read().split()
+    assert ran_by[1] == worker, (s["index"], ran_by, worker)  # the worker ran every shard
+# The same trials give the same figures, sharded by another process or not.
+a, b = json.load(open(before)), json.load(open(os.path.join(d, "eval_meta_zone3", "eval.json")))
+for k in ("success_rate", "trials", "fall_rate"):
+    assert a[k] == b[k], (k, a[k], b[k])
+PY
 state "$B" "
 assert d['stages']['eval_meta_zone3']['attempts']==1
 assert d['stages']['walk1']['attempts']==1
