@@ -1,11 +1,11 @@
 // The Kubernetes manifests agree with the repository: the ConfigMap carries configs/default.json,
 // and the ports actors dial are the ones the learner binds and its Service exposes.
+#include <gtest/gtest.h>
+
 #include <fstream>
 #include <regex>
 #include <sstream>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "common/json_util.h"
 
@@ -28,24 +28,26 @@ TEST(K8sManifests, ConfigMapIsTheDefaultConfig) {
   while (std::getline(body, line)) json_text += (line.size() >= 4 ? line.substr(4) : line) + "\n";
   const Json from_map = Json::parse(json_text);
   const Json from_repo = LoadJsonFile(std::string(PERCH_SOURCE_DIR) + "/configs/default.json");
-  EXPECT_EQ(from_map, from_repo)
-      << "k8s/configmap.yaml is stale: run scripts/gen-k8s-configmap.sh";
+  EXPECT_EQ(from_map, from_repo) << "k8s/configmap.yaml is stale: run scripts/gen-k8s-configmap.sh";
 }
 
 TEST(K8sManifests, ActorPortsMatchLearnerBindsAndService) {
   const std::string learner = Read("k8s/learner.yaml");
   const std::string actors = Read("k8s/actors.yaml");
   std::smatch m;
-  ASSERT_TRUE(std::regex_search(learner, m, std::regex(R"re("--rollout-bind", "tcp://\*:(\d+)")re")));
+  ASSERT_TRUE(
+      std::regex_search(learner, m, std::regex(R"re("--rollout-bind", "tcp://\*:(\d+)")re")));
   const std::string rollout = m[1];
-  ASSERT_TRUE(std::regex_search(learner, m, std::regex(R"re("--weights-bind", "tcp://\*:(\d+)")re")));
+  ASSERT_TRUE(
+      std::regex_search(learner, m, std::regex(R"re("--weights-bind", "tcp://\*:(\d+)")re")));
   const std::string weights = m[1];
   EXPECT_NE(actors.find("\"--rollout-port\", \"" + rollout + "\""), std::string::npos);
   EXPECT_NE(actors.find("\"--weights-port\", \"" + weights + "\""), std::string::npos);
   EXPECT_NE(learner.find("port: " + rollout), std::string::npos);
   EXPECT_NE(learner.find("port: " + weights), std::string::npos);
   // Actors reach the learner through its Service name.
-  ASSERT_TRUE(std::regex_search(learner, m, std::regex(R"re(kind: Service\s+metadata:\s+name: (\S+))re")));
+  ASSERT_TRUE(
+      std::regex_search(learner, m, std::regex(R"re(kind: Service\s+metadata:\s+name: (\S+))re")));
   EXPECT_NE(actors.find("\"--learner-host\", \"" + std::string(m[1]) + "\""), std::string::npos);
 }
 
@@ -79,8 +81,8 @@ TEST(K8sManifests, RecipeEvalWorkersShareTheRecipesDirectory) {
   ASSERT_TRUE(std::regex_search(recipe, m, std::regex(R"re("--dir", "(\S+)")re")));
   const std::string dir = m[1];
   EXPECT_NE(workers.find("\"worker\", \"--dir\", \"" + dir + "\""), std::string::npos) << dir;
-  ASSERT_TRUE(std::regex_search(
-      recipe, m, std::regex(R"re(kind: StatefulSet\s+metadata:\s+name: (\S+))re")));
+  ASSERT_TRUE(std::regex_search(recipe, m,
+                                std::regex(R"re(kind: StatefulSet\s+metadata:\s+name: (\S+))re")));
   const std::string set = m[1];
   ASSERT_TRUE(std::regex_search(
       recipe, m, std::regex(R"re(volumeClaimTemplates:\s+- metadata:\s+name: (\S+))re")));

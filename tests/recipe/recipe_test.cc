@@ -170,8 +170,8 @@ TEST(Recipe, SelectionSearchesTheMilestonesWhenAsked) {
 // stage of trials with no output but its result; and the shard count is not in the fingerprint
 // (the merged result is the unsharded one).
 TEST(Recipe, EvaluationShardsCoverEveryTrialOnce) {
-  for (const auto& [trials, shards] : std::vector<std::pair<int64_t, int>>{
-           {1000, 4}, {1000, 7}, {3, 4}, {1, 4}, {10, 1}}) {
+  for (const auto& [trials, shards] :
+       std::vector<std::pair<int64_t, int>>{{1000, 4}, {1000, 7}, {3, 4}, {1, 4}, {10, 1}}) {
     const std::vector<TrialShard> t = TrialShards(trials, shards);
     int64_t next = 0;
     for (const TrialShard& s : t) {
