@@ -141,23 +141,23 @@ void AddMetaEvalFlags(CLI::App* cmd, EvalCommand* o) {
                   "write (sit, turn_left, turn_right or walk; a turn's or the walk's bank is for "
                   "its start.banks; the episode's first run is not a hand-over)")
       ->capture_default_str();
-  cmd->add_option("--lookahead-delays-s", o->lookahead_delays_s,
+  cmd->add_option("--lookahead-delays-s", o->lookahead.lookahead_delays_s,
                   "sit_chair with a meta policy: at each of its switches also simulate the switch "
                   "delayed by each of these times to the episode's end and take the best "
                   "(hierarchy/meta_lookahead.h; the planner's lookahead is in its config) [s]")
       ->check(CLI::Range(0.001, 3.0));
-  cmd->add_flag("--lookahead-sides", o->lookahead_sides,
+  cmd->add_flag("--lookahead-sides", o->lookahead.lookahead_sides,
                 "sit_chair with a meta policy: at each of its switches into a turn also simulate "
                 "the other turn (hierarchy/meta_lookahead.h)");
-  cmd->add_option("--lookahead-straight-s", o->lookahead_straight_s,
+  cmd->add_option("--lookahead-straight-s", o->lookahead.lookahead_straight_s,
                   "sit_chair with a meta policy: at its first step also simulate the walker "
                   "walking straight on for each of these times before the policy steers [s]")
       ->check(CLI::Range(0.001, 3.0));
-  cmd->add_option("--lookahead-detour-deg", o->lookahead_detour_deg,
+  cmd->add_option("--lookahead-detour-deg", o->lookahead.lookahead_detour_deg,
                   "sit_chair with a meta policy and --lookahead-straight-s: each start also with "
                   "the walker heading this far off its facing (+ left), e.g. round the chair [deg]")
       ->check(CLI::Range(-180.0, 180.0));
-  cmd->add_option("--lookahead-rank", o->lookahead_rank,
+  cmd->add_option("--lookahead-rank", o->lookahead.lookahead_rank,
                   "sit_chair with a meta policy's lookahead: which of two successful "
                   "outcomes is better, the sooner or the nearer (smaller minimum pelvis - seat "
                   "distance); the planner's is its config's lookahead_rank")

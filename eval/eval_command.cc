@@ -30,12 +30,7 @@ using RecordingWriter =
 // The meta policy's lookahead from the --lookahead-* flags or --lookahead FILE. Refused before
 // any work (the planner's calibration, the trials).
 PlannerConfig ResolveLookahead(const EvalCommand& o) {
-  PlannerConfig la;  // a meta policy's lookahead: only its lookahead_* fields count
-  la.lookahead_delays_s = o.lookahead_delays_s;
-  la.lookahead_sides = o.lookahead_sides;
-  la.lookahead_straight_s = o.lookahead_straight_s;
-  la.lookahead_rank = o.lookahead_rank;
-  la.lookahead_detour_deg = o.lookahead_detour_deg;
+  PlannerConfig la = o.lookahead;  // a meta policy's lookahead: only its lookahead_* fields count
   if (!o.lookahead_file.empty()) {
     la = LookaheadFromFile(o.lookahead_file, la);
   }

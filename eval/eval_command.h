@@ -41,12 +41,10 @@ struct EvalCommand {
   std::string save_sit_starts;         // sit_chair: a bank of the states at every hand-over to sit
   std::string save_failed_sit_starts;  // ... of the trials that failed
   std::string hand_overs_to = "sit";   // sit_chair: whose hand-overs those banks hold
-  std::vector<double> lookahead_delays_s;    // sit_chair with a meta policy: its lookahead
-  bool lookahead_sides = false;              // ... with the other turn at each turn switch
-  std::vector<double> lookahead_straight_s;  // ... with straight-on starts [s]
-  std::vector<double> lookahead_detour_deg;  // ... and detours [deg]
-  std::string lookahead_rank = "sooner";     // ... and how it ranks two successes
-  std::string lookahead_file;  // ... or all of them from a JSON file (configs/lookahead/)
+  // sit_chair with a meta policy: its lookahead (only the fields of LookaheadFieldNames(): the
+  // --lookahead-* flags), or all of them from a JSON file (configs/lookahead/).
+  PlannerConfig lookahead;
+  std::string lookahead_file;
   bool record_routes = false;  // ... and each start route's outcome in the records
   std::string start_bank = "data/banks/walk_end_poses_eval.bin";  // sit_chair: walk starts
   std::string records;  // sit_chair: per-trial records, appended as trials finish (resumes)

@@ -1,5 +1,6 @@
 #include "eval/eval_config.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <iostream>
 #include <set>
@@ -30,14 +31,12 @@ PlannerConfig LookaheadFromFile(const std::string& path, const PlannerConfig& fl
   }
   const Json j = LoadJsonFile(path);
   if (!j.is_object()) throw ConfigError(path + ": not a JSON object");
-  static const std::set<std::string> kKeys = {"lookahead_delays_s", "lookahead_sides",
-                                              "lookahead_straight_s", "lookahead_detour_deg",
-                                              "lookahead_rank"};
+  const std::vector<std::string>& keys = LookaheadFieldNames();
+  std::string known;
+  for (const std::string& k : keys) known += (known.empty() ? "" : ", ") + k;
   for (const auto& [k, v] : j.items()) {
-    if (kKeys.count(k) == 0) {
-      throw ConfigError(path + ": \"" + k +
-                        "\" is not a lookahead field (lookahead_delays_s, lookahead_sides, "
-                        "lookahead_straight_s, lookahead_detour_deg, lookahead_rank)");
+    if (std::find(keys.begin(), keys.end(), k) == keys.end()) {
+      throw ConfigError(path + ": \"" + k + "\" is not a lookahead field (" + known + ")");
     }
   }
   // The planner config's own checks (types, ranges, at most 8 times, a detour needs its times);

@@ -175,6 +175,20 @@ PlannerConfig PlannerConfig::FromJson(const Json& j, const std::string& ctx) {
 
 Json PlannerConfig::ToJson() const { return PlannerConfigFields().Write(*this); }
 
+const std::vector<std::string>& LookaheadFieldNames() {
+  static const std::vector<std::string> names = {"lookahead_delays_s", "lookahead_sides",
+                                                 "lookahead_straight_s", "lookahead_detour_deg",
+                                                 "lookahead_rank"};
+  return names;
+}
+
+Json LookaheadJson(const PlannerConfig& c) {
+  const Json all = c.ToJson();
+  Json j = Json::object();
+  for (const std::string& k : LookaheadFieldNames()) j[k] = all.at(k);
+  return j;
+}
+
 Eigen::Vector2d TurnCalibration::DisplacementAt(double rotation) const {
   for (size_t k = 0; k < rotation_rad.size(); ++k) {
     if (rotation_rad[k] >= rotation) return disp[k];

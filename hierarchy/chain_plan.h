@@ -166,6 +166,11 @@ struct PlannerConfig {
 // PlannerConfig's fields, each written once (common/field_table.h).
 const FieldTable<PlannerConfig>& PlannerConfigFields();
 
+// The test-time lookahead's fields of PlannerConfig: a meta policy's --lookahead-* flags, the keys
+// of a --lookahead FILE and of an evaluation's header. LookaheadJson: those fields of c.
+const std::vector<std::string>& LookaheadFieldNames();
+Json LookaheadJson(const PlannerConfig& c);
+
 struct PlanRule {
   double reach_m = 0.08;     // hand over when the predicted turn end is this close to the sit start
   double pass_m = 0.35;      // ... or when it has come this close and starts moving away again

@@ -312,12 +312,7 @@ Json MetaEvalHeader(const TaskEnvConfig& config, const proto::ModelWeights& meta
     h["meta_sha256"] = Sha256Hex(meta.SerializeAsString());
   }
   if (!planned && lookahead) {
-    const PlannerConfig& la = o.policy_lookahead;
-    h["lookahead_delays_s"] = la.lookahead_delays_s;
-    h["lookahead_sides"] = la.lookahead_sides;
-    h["lookahead_straight_s"] = la.lookahead_straight_s;
-    h["lookahead_rank"] = la.lookahead_rank;
-    h["lookahead_detour_deg"] = la.lookahead_detour_deg;
+    h.update(LookaheadJson(o.policy_lookahead));
   }
   Json subs = Json::object();
   for (const FrozenPolicyData& f : frozen) subs[f.name] = Sha256Hex(f.model);
@@ -395,9 +390,10 @@ Json AggregateMeta(const Json& header, std::vector<MetaTrialRecord> results) {
     sides[side] = {{"trials", c[1]}, {"success_rate", c[1] ? double(c[0]) / c[1] : 0.0}};
   }
   Json j = Json::object();
-  for (const char* k : {"task", "zone", "chair", "seed", "stochastic", "choices", "decider",
-                        "planner", "lookahead_delays_s", "lookahead_sides", "lookahead_straight_s",
-                        "lookahead_rank", "lookahead_detour_deg"}) {
+  std::vector<std::string> keys = {"task",       "zone",    "chair",   "seed",
+                                   "stochastic", "choices", "decider", "planner"};
+  keys.insert(keys.end(), LookaheadFieldNames().begin(), LookaheadFieldNames().end());
+  for (const std::string& k : keys) {
     if (header.contains(k)) j[k] = header[k];
   }
   j.update(Json{{"trials", trials},
