@@ -1,6 +1,7 @@
 // The cluster's benchmarks (perch bench cluster, flow, scale, group, train): each runs real
 // learner and actor processes (or in-process actor services over loopback) and prints one JSON
-// object with --json. Ratios are against a baseline measured in the same run (docs/scaling.md "Measured").
+// object with --json. Ratios are against a baseline measured in the same run (docs/scaling.md
+// "Measured").
 #pragma once
 
 #include <cstdint>
