@@ -4,6 +4,8 @@
 #include <cmath>
 #include <map>
 
+#include "common/field_table.h"
+
 namespace perch {
 
 const char* const kCmuAcknowledgement =
@@ -152,34 +154,36 @@ Eigen::Matrix3Xd ApplyPlanar(const Planar& pl, const Eigen::Matrix3Xd& m) {
 
 // ---------------------------------------------------------------- config
 
-Json ClipSpec::ToJson() const {
-  return Json{{"name", name},
-              {"bvh", bvh},
-              {"description", description},
-              {"first_frame", first_frame},
-              {"last_frame", last_frame},
-              {"source_frame_time_s", source_frame_time_s},
-              {"mirror", mirror},
-              {"loop", loop}};
+const FieldTable<ClipSpec>& ClipSpecFields() {
+  using C = ClipSpec;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .CustomAlways(
+              "name", "output clip data/motions/NAME.json (required)",
+              [](const Json& j, C& c, const std::string& ctx) {
+                GetRequired(j, "name", c.name, ctx);
+              },
+              [](const C& c, Json& j) { j["name"] = c.name; })
+          .CustomAlways(
+              "bvh", "source BVH file name (required)",
+              [](const Json& j, C& c, const std::string& ctx) {
+                GetRequired(j, "bvh", c.bvh, ctx);
+              },
+              [](const C& c, Json& j) { j["bvh"] = c.bvh; })
+          .Add("description", &C::description, "what the clip is and where it comes from")
+          .Add("first_frame", &C::first_frame, "first source frame (inclusive)", NonNegative<int>())
+          .Add("last_frame", &C::last_frame, "last source frame (inclusive; -1: the last)")
+          .Add("source_frame_time_s", &C::source_frame_time_s,
+               "source frame time [s] (0: the header's)", NonNegative<double>())
+          .Add("mirror", &C::mirror, "left/right mirror of the source")
+          .Add("loop", &C::loop, "cut one cycle and make it loop");
+  return t;
 }
 
+Json ClipSpec::ToJson() const { return ClipSpecFields().Write(*this); }
+
 ClipSpec ClipSpec::FromJson(const Json& j, const std::string& ctx) {
-  CheckKnownKeys(j,
-                 {"name", "bvh", "description", "first_frame", "last_frame", "source_frame_time_s",
-                  "mirror", "loop"},
-                 ctx);
-  ClipSpec s;
-  GetRequired(j, "name", s.name, ctx);
-  GetRequired(j, "bvh", s.bvh, ctx);
-  GetOptional(j, "description", s.description, ctx);
-  GetOptional(j, "first_frame", s.first_frame, ctx);
-  GetOptional(j, "last_frame", s.last_frame, ctx);
-  GetOptional(j, "source_frame_time_s", s.source_frame_time_s, ctx);
-  GetOptional(j, "mirror", s.mirror, ctx);
-  GetOptional(j, "loop", s.loop, ctx);
-  if (s.first_frame < 0) throw ConfigError(ctx + ".first_frame: must be >= 0");
-  if (s.source_frame_time_s < 0) throw ConfigError(ctx + ".source_frame_time_s: must be >= 0");
-  return s;
+  return ClipSpecFields().Read(j, ctx);
 }
 
 RetargetConfig::RetargetConfig() {
@@ -210,60 +214,52 @@ RetargetConfig::RetargetConfig() {
   clips = {walk, left, right, sit};
 }
 
-Json RetargetConfig::ToJson() const {
-  Json c = Json::array();
-  for (const auto& s : clips) c.push_back(s.ToJson());
-  return Json{{"frame_time_s", frame_time_s},
-              {"bvh_unit_m", bvh_unit_m},
-              {"foot_weight", foot_weight},
-              {"contact_height_m", contact_height_m},
-              {"loop_min_period_s", loop_min_period_s},
-              {"loop_max_period_s", loop_max_period_s},
-              {"first_frame_iters", first_frame_iters},
-              {"ik",
-               {{"damping", ik.damping},
-                {"max_iters", ik.max_iters},
-                {"min_improvement", ik.min_improvement},
-                {"fd_step", ik.fd_step},
-                {"max_step", ik.max_step}}},
-              {"clips", c}};
+const FieldTable<IkOptions>& IkOptionsFields() {
+  using C = IkOptions;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("damping", &C::damping, "lambda of (J^T W J + lambda^2 I) [m]")
+          .Add("max_iters", &C::max_iters, "iterations per solve")
+          .Add("min_improvement", &C::min_improvement, "stop below this error drop [m^2]")
+          .Add("fd_step", &C::fd_step, "finite-difference step [m or rad]")
+          .Add("max_step", &C::max_step, "cap on |delta| per iteration [m or rad]");
+  return t;
 }
 
+const FieldTable<RetargetConfig>& RetargetConfigFields() {
+  using C = RetargetConfig;
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("frame_time_s", &C::frame_time_s, "output frame time [s]", Positive<double>())
+          .Add("bvh_unit_m", &C::bvh_unit_m, "BVH units to metres", Positive<double>())
+          .Add("foot_weight", &C::foot_weight, "IK weight of ankle and toe points")
+          .Add("contact_height_m", &C::contact_height_m, "foot on the ground below [m]")
+          .Add("loop_min_period_s", &C::loop_min_period_s, "gait-cycle search window from [s]")
+          .Add("loop_max_period_s", &C::loop_max_period_s, "... to [s]")
+          .Add("first_frame_iters", &C::first_frame_iters, "IK iterations of the first frame")
+          .Nested("ik", &C::ik, IkOptionsFields(), "the IK solver")
+          .Custom(
+              "clips", "the clips (given: replace the defaults)",
+              [](const Json& j, C& c, const std::string& ctx) {
+                if (!j["clips"].is_array()) throw ConfigError(ctx + ".clips: expected an array");
+                c.clips.clear();
+                for (size_t i = 0; i < j["clips"].size(); ++i) {
+                  c.clips.push_back(
+                      ClipSpec::FromJson(j["clips"][i], ctx + ".clips[" + std::to_string(i) + "]"));
+                }
+              },
+              [](const C& c, Json& j) {
+                Json a = Json::array();
+                for (const ClipSpec& s : c.clips) a.push_back(s.ToJson());
+                j["clips"] = a;
+              });
+  return t;
+}
+
+Json RetargetConfig::ToJson() const { return RetargetConfigFields().Write(*this); }
+
 RetargetConfig RetargetConfig::FromJson(const Json& j, const std::string& ctx) {
-  CheckKnownKeys(j,
-                 {"frame_time_s", "bvh_unit_m", "foot_weight", "contact_height_m",
-                  "loop_min_period_s", "loop_max_period_s", "first_frame_iters", "ik", "clips"},
-                 ctx);
-  RetargetConfig c;
-  GetOptional(j, "frame_time_s", c.frame_time_s, ctx);
-  GetOptional(j, "bvh_unit_m", c.bvh_unit_m, ctx);
-  GetOptional(j, "foot_weight", c.foot_weight, ctx);
-  GetOptional(j, "contact_height_m", c.contact_height_m, ctx);
-  GetOptional(j, "loop_min_period_s", c.loop_min_period_s, ctx);
-  GetOptional(j, "loop_max_period_s", c.loop_max_period_s, ctx);
-  GetOptional(j, "first_frame_iters", c.first_frame_iters, ctx);
-  if (!(c.frame_time_s > 0)) throw ConfigError(ctx + ".frame_time_s: must be > 0");
-  if (!(c.bvh_unit_m > 0)) throw ConfigError(ctx + ".bvh_unit_m: must be > 0");
-  if (j.contains("ik")) {
-    const Json& k = j["ik"];
-    const std::string kc = ctx + ".ik";
-    if (!k.is_object()) throw ConfigError(kc + ": expected an object");
-    CheckKnownKeys(k, {"damping", "max_iters", "min_improvement", "fd_step", "max_step"}, kc);
-    GetOptional(k, "damping", c.ik.damping, kc);
-    GetOptional(k, "max_iters", c.ik.max_iters, kc);
-    GetOptional(k, "min_improvement", c.ik.min_improvement, kc);
-    GetOptional(k, "fd_step", c.ik.fd_step, kc);
-    GetOptional(k, "max_step", c.ik.max_step, kc);
-  }
-  if (j.contains("clips")) {
-    if (!j["clips"].is_array()) throw ConfigError(ctx + ".clips: expected an array");
-    c.clips.clear();
-    for (size_t i = 0; i < j["clips"].size(); ++i) {
-      c.clips.push_back(
-          ClipSpec::FromJson(j["clips"][i], ctx + ".clips[" + std::to_string(i) + "]"));
-    }
-  }
-  return c;
+  return RetargetConfigFields().Read(j, ctx);
 }
 
 // ---------------------------------------------------------------- humanoid key points
