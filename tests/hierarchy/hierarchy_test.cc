@@ -3,16 +3,10 @@
 #include <gtest/gtest.h>
 
 #include "learner/ppo.h"
+#include "tests/support/untrained.h"
 
 namespace perch {
 namespace {
-
-proto::ModelWeights Untrained(int obs_dim, uint64_t seed) {
-  PpoLearner learner(PolicyConfig::Subtask(obs_dim), PpoConfig::Subtask(), seed);
-  proto::ModelWeights w;
-  learner.ExportWeights(&w);
-  return w;
-}
 
 std::array<proto::ModelWeights, kNumSubtasks> UntrainedSet() {
   std::array<proto::ModelWeights, kNumSubtasks> m;

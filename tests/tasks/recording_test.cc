@@ -13,16 +13,10 @@
 #include "motion/bvh_export.h"
 #include "tasks/registry.h"
 #include "tasks/task_eval.h"
+#include "tests/support/untrained.h"
 
 namespace perch {
 namespace {
-
-proto::ModelWeights Untrained(int obs_dim, uint64_t seed) {
-  PpoLearner learner(PolicyConfig::Subtask(obs_dim), PpoConfig::Subtask(), seed);
-  proto::ModelWeights w;
-  learner.ExportWeights(&w);
-  return w;
-}
 
 TaskEnvConfig SitConfig() {
   return TaskEnvConfig::FromJson(Json{{"task", "sit"}, {"sit", {{"eval_episode_s", 1.0}}}}, "t");

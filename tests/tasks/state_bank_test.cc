@@ -10,18 +10,12 @@
 #include "learner/ppo.h"
 #include "tasks/turn.h"
 #include "tasks/walk.h"
+#include "tests/support/untrained.h"
 
 namespace perch {
 namespace {
 
 namespace fs = std::filesystem;
-
-proto::ModelWeights Untrained(int obs_dim, uint64_t seed) {
-  PpoLearner learner(PolicyConfig::Subtask(obs_dim), PpoConfig::Subtask(), seed);
-  proto::ModelWeights w;
-  learner.ExportWeights(&w);
-  return w;
-}
 
 proto::StateBank SmallWalkBank(int workers, uint64_t seed = 3) {
   SampleEndPosesOptions o;

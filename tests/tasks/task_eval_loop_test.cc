@@ -5,6 +5,7 @@
 
 #include "learner/ppo.h"
 #include "tasks/task_eval.h"
+#include "tests/support/untrained.h"
 
 namespace perch {
 namespace {
@@ -28,13 +29,6 @@ class CountingObserver : public EpisodeObserver {
   std::vector<bool> fell_;
   int last_step_ = 0;
 };
-
-proto::ModelWeights Untrained(int obs_dim, uint64_t seed) {
-  PpoLearner learner(PolicyConfig::Subtask(obs_dim), PpoConfig::Subtask(), seed);
-  proto::ModelWeights w;
-  learner.ExportWeights(&w);
-  return w;
-}
 
 TEST(EvalLoop, EpisodesAreSeededByIndexAndEndAtFallOrLimit) {
   TaskEnvConfig c = TaskEnvConfig::Defaults("walk");

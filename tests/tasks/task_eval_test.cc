@@ -7,16 +7,10 @@
 
 #include "learner/ppo.h"
 #include "tasks/registry.h"
+#include "tests/support/untrained.h"
 
 namespace perch {
 namespace {
-
-proto::ModelWeights Untrained(int obs_dim, uint64_t seed) {
-  PpoLearner learner(PolicyConfig::Subtask(obs_dim), PpoConfig::Subtask(), seed);
-  proto::ModelWeights w;
-  learner.ExportWeights(&w);
-  return w;
-}
 
 TEST(TaskEval, WilsonInterval) {
   auto a = WilsonInterval95(0, 10);
