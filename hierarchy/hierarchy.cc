@@ -9,6 +9,7 @@
 #include "envs/spawn.h"
 #include "hierarchy/chain_plan.h"
 #include "tasks/config_fields.h"
+#include "tasks/episode_loop.h"
 #include "tasks/imitation.h"
 #include "tasks/registry.h"
 #include "tasks/state_bank.h"
@@ -147,6 +148,7 @@ bool SitChairTask::InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidS
 
 void SitChairTask::OnReset(HumanoidChairEnv& env, Rng& rng) {
   active_ = kWalk;
+  seated_ = Seated();
   prev_distance_ = env.PelvisSeatDistance();
   // At reset the walk target is the chair's origin until the first meta decision (notes 4.7).
   env.SetWalkTarget(env.SeatTargetWorld().head<2>());
@@ -161,6 +163,12 @@ TaskStep SitChairTask::OnStep(const HumanoidChairEnv& env, const float* action) 
   prev_distance_ = d;
   const double min_z = active_ == kSit ? c_.sit_min_root_z : c_.min_root_z;
   r.terminated = env.humanoid_state().root_pos.z() < min_z;
+  seated_.run = env.PelvisSeatContact() ? seated_.run + 1 : 0;
+  const int need = static_cast<int>(std::ceil(c_.success_contact_s / dt_ - 1e-9));
+  if (!seated_.succeeded && seated_.run >= need) {
+    seated_.succeeded = true;
+    r.success = true;
+  }
   return r;
 }
 
@@ -432,6 +440,66 @@ Json PlanSummary(const MetaPlan& plan, const ChainTally& t, const PlannerConfig&
               {"planner", planner.ToJson()}};
 }
 
+// The chain in the shared episode loop (tasks/episode_loop.h): its rules pick the subtask at each
+// control step, the subtask's frozen policy acts; success is the task's (SitChairTask::OnStep).
+class ChainDriver : public EpisodeDriver {
+ public:
+  ChainDriver(HumanoidChairEnv* env, SitChairTask* task, SubtaskPolicies* policies,
+              ChainRules* rules, const ChainOptions& o, std::vector<PoseFrame>* frames)
+      : env_(env), task_(task), policies_(policies), rules_(rules), o_(o), frames_(frames) {}
+
+  void Begin(int episode, uint64_t env_seed, const float* /*obs*/) override {
+    episode_ = episode;
+    step_ = 0;
+    begun_ = -1;
+    success_step_ = 0;
+    rules_->Begin(*env_);
+    if (o_.recorder != nullptr) {
+      RecordingExtras x;
+      x.active_subtask = rules_->phase();
+      o_.recorder->Begin(*env_, episode, env_seed, x);
+    }
+    min_dist_ = env_->PelvisSeatDistance();
+  }
+  bool Act(const float* /*obs*/, Rng& rng, float* action) override {
+    if (!rules_->Decide(*env_, step_, episode_)) return false;
+    const int phase = rules_->phase();
+    task_->set_active(phase);
+    if (phase != begun_) {
+      policies_->Begin(phase, *env_);
+      begun_ = phase;
+    }
+    if (episode_ == 0 && frames_ != nullptr) {
+      frames_->push_back(
+          PoseFrameOf(env_->humanoid_state(), step_ * env_->spec().control_dt, SubtaskName(phase)));
+    }
+    policies_->Act(phase, *env_, rng, !o_.stochastic, action);
+    return true;
+  }
+  void Stepped(const StepResult& r, int steps) override {
+    step_ = steps;
+    if (o_.recorder != nullptr) {
+      RecordingExtras x;
+      x.active_subtask = rules_->phase();
+      o_.recorder->Step(*env_, r, x);
+    }
+    min_dist_ = std::min(min_dist_, env_->PelvisSeatDistance());
+    if (r.success) success_step_ = steps;
+  }
+  int success_step() const { return success_step_; }  // 0: not (yet) seated
+  double min_dist() const { return min_dist_; }       // [m] pelvis - seat target, this episode
+
+ private:
+  HumanoidChairEnv* env_;
+  SitChairTask* task_;
+  SubtaskPolicies* policies_;
+  ChainRules* rules_;
+  const ChainOptions& o_;
+  std::vector<PoseFrame>* frames_;
+  int episode_ = 0, step_ = 0, begun_ = -1, success_step_ = 0;
+  double min_dist_ = 0.0;
+};
+
 }  // namespace
 
 Json EvaluateChain(const TaskEnvConfig& config,
@@ -447,8 +515,6 @@ Json EvaluateChain(const TaskEnvConfig& config,
   auto& task = const_cast<SitChairTask&>(dynamic_cast<const SitChairTask&>(env->task()));
   const double dt = env->spec().control_dt;
   const int max_steps = env->spec().max_episode_steps;
-  const int need = static_cast<int>(std::ceil(task.config().success_contact_s / dt - 1e-9));
-  std::vector<float> obs(env->spec().obs_dim), action(21);
   if (o.decision_period < 1) throw ConfigError("chain: decision period must be >= 1");
   // The planned hand-over: where the sit starts, how each turn moves (hierarchy/chain_plan.h).
   MetaPlan plan;
@@ -462,61 +528,23 @@ Json EvaluateChain(const TaskEnvConfig& config,
   }
   ChainTally tally;
   ChainRules rules(o, plan, rule, config.env.chair_placement.yaw, dt, &tally);
+  ChainDriver driver(env.get(), &task, &policies, &rules, o, frames);
   int successes = 0, falls = 0;
   std::array<int, kNumSubtasks> falls_in{};  // by the subtask acting when the episode ended
   // Per episode: spawn azimuth [deg], the turn taken, the subtask it fell in ("" none), success.
   Json per_episode = Json::array();
   std::vector<double> min_dists, sit_times;
   for (int e = 0; e < o.episodes; ++e) {
-    const uint64_t episode_seed = o.seed * 1000003ULL + static_cast<uint64_t>(e);
-    env->Seed(2 * episode_seed);
-    Rng act_rng(2 * episode_seed + 1);
-    env->Reset(obs.data());
-    rules.Begin(*env);
-    int run = 0, begun = -1;
-    if (o.recorder != nullptr) {
-      RecordingExtras x;
-      x.active_subtask = rules.phase();
-      o.recorder->Begin(*env, e, 2 * episode_seed, x);
-    }
-    double min_dist = env->PelvisSeatDistance();
-    bool success = false, fell = false;
-    for (int k = 0; k < max_steps; ++k) {
-      if (!rules.Decide(*env, k, e)) break;
-      const int phase = rules.phase();
-      task.set_active(phase);
-      if (phase != begun) {
-        policies.Begin(phase, *env);
-        begun = phase;
-      }
-      if (e == 0 && frames != nullptr) {
-        frames->push_back(PoseFrameOf(env->humanoid_state(), k * dt, SubtaskName(phase)));
-      }
-      policies.Act(phase, *env, act_rng, !o.stochastic, action.data());
-      const StepResult r = env->Step(action.data(), obs.data());
-      if (o.recorder != nullptr) {
-        RecordingExtras x;
-        x.active_subtask = phase;
-        o.recorder->Step(*env, r, x);
-      }
-      min_dist = std::min(min_dist, env->PelvisSeatDistance());
-      run = env->PelvisSeatContact() ? run + 1 : 0;
-      if (!success && run >= need) {
-        success = true;
-        sit_times.push_back((k + 1) * dt);
-      }
-      if (r.terminated) {
-        fell = true;
-        falls_in[phase] += 1;
-        break;
-      }
-    }
+    const EpisodeEnd end = RunEpisode(env.get(), e, o.seed, {max_steps, false}, &driver);
+    const bool success = driver.success_step() > 0;
+    if (success) sit_times.push_back(driver.success_step() * dt);
+    if (end.fell) falls_in[rules.phase()] += 1;
     successes += success;
     per_episode.push_back({task.spawn_theta() * 180.0 / M_PI, rules.turn_taken(),
-                           fell ? SubtaskName(rules.phase()) : "", success, rules.sit_from()});
-    if (o.recorder != nullptr) o.recorder->End(success, fell);
-    falls += fell;
-    min_dists.push_back(min_dist);
+                           end.fell ? SubtaskName(rules.phase()) : "", success, rules.sit_from()});
+    if (o.recorder != nullptr) o.recorder->End(success, end.fell);
+    falls += end.fell;
+    min_dists.push_back(driver.min_dist());
   }
   const double n = o.episodes;
   const auto ci = WilsonInterval95(successes, o.episodes);

@@ -105,8 +105,19 @@ class SitChairTask : public Task {
   bool InitialState(const HumanoidChairEnv& env, Rng& rng, HumanoidState* s) override;
   void OnReset(HumanoidChairEnv& env, Rng& rng) override;
   TaskStep OnStep(const HumanoidChairEnv& env, const float* action) override;
+  bool has_success() const override { return true; }
   Json SaveMemory() const override;
   void LoadMemory(const Json& j) override;
+
+  // The hierarchy's success rule, judged here only (StepResult::success, once per episode): the
+  // pelvis on the seat for success_contact_s without a break. Its counters travel in MetaEnvState
+  // rather than in SaveMemory, so the hand-over banks written from this task stay as they were.
+  struct Seated {
+    int run = 0;  // control steps of continuous seated contact
+    bool succeeded = false;
+  };
+  const Seated& seated() const { return seated_; }
+  void set_seated(const Seated& s) { seated_ = s; }
 
   // The subtask acting now (the termination height depends on it).
   void set_active(int subtask) { active_ = subtask; }
@@ -121,6 +132,7 @@ class SitChairTask : public Task {
   int active_ = kWalk;
   double prev_distance_ = 0.0;
   double spawn_theta_ = 0.0;
+  Seated seated_;
 };
 
 // A turn trained with `heading_goal` (docs/subtasks.md) observes the reference heading: in the

@@ -52,8 +52,6 @@ MetaEnv::MetaEnv(const TaskEnvConfig& config) : config_(config) {
   spec_.control_dt = inner.control_dt * meta_.period;
   spec_.max_episode_steps = (inner.max_episode_steps + meta_.period - 1) / meta_.period;
   spec_.has_success = true;
-  success_steps_ =
-      static_cast<int>(std::ceil(task_config_.success_contact_s / inner.control_dt - 1e-9));
   inner_obs_.resize(inner.obs_dim);
   action_.resize(inner.act_dim);
   blend_action_.resize(inner.act_dim);
@@ -109,7 +107,6 @@ void MetaEnv::Reset(float* obs) {
   active_ = meta_.fixed_order ? choice_ids_[0] : kWalk;
   order_pos_ = 0;
   begun_ = false;
-  contact_run_ = 0;
   prev_dist_ = env_->PelvisSeatDistance();
   episode_ = MetaEpisode();
   episode_.min_dist_m = prev_dist_;
@@ -190,8 +187,7 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
     ++episode_.control_steps;
     ++active_steps_;
     episode_.min_dist_m = std::min(episode_.min_dist_m, env_->PelvisSeatDistance());
-    contact_run_ = env_->PelvisSeatContact() ? contact_run_ + 1 : 0;
-    if (episode_.success_step < 0 && contact_run_ >= success_steps_) {
+    if (r.success) {  // the task's rule (SitChairTask::OnStep), once per episode
       episode_.success_step = episode_.control_steps;
       const Eigen::Vector3d d = env_->PelvisPosition() - env_->SeatTargetWorld();
       episode_.seated_pos_err_m = d.head<2>().norm();
@@ -238,7 +234,7 @@ MetaEnvState MetaEnv::SaveState() const {
   s.active_steps = active_steps_;
   s.blend_from = blend_from_;
   s.blend_left = blend_left_;
-  s.contact_run = contact_run_;
+  s.seated = task_->seated();
   s.prev_dist = prev_dist_;
   s.episode = episode_;
   return s;
@@ -258,7 +254,7 @@ void MetaEnv::RestoreState(const MetaEnvState& s) {
   active_steps_ = s.active_steps;
   blend_from_ = s.blend_from;
   blend_left_ = s.blend_left;
-  contact_run_ = s.contact_run;
+  task_->set_seated(s.seated);
   prev_dist_ = s.prev_dist;
   episode_ = s.episode;
 }

@@ -53,7 +53,8 @@ struct MetaEnvState {
   Rng rng;
   int active = 0, order_pos = 0;
   bool begun = false;
-  int active_steps = 0, contact_run = 0;
+  int active_steps = 0;
+  SitChairTask::Seated seated;  // the task's success counters
   int blend_from = 0, blend_left = 0;
   double prev_dist = 0.0;  // [m]
   MetaEpisode episode;
@@ -113,8 +114,6 @@ class MetaEnv : public Env, public FrozenPolicyEnv {
   int order_pos_ = 0;  // fixed_order: index in choices of the running subtask
   bool begun_ = false;
   int active_steps_ = 0;    // control steps the active subtask has run
-  int contact_run_ = 0;     // control steps of continuous seated contact
-  int success_steps_ = 0;   // ... needed for success
   double prev_dist_ = 0.0;  // pelvis - seat distance at the previous meta-step end [m]
   MetaEpisode episode_;
 };

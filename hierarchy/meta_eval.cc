@@ -21,6 +21,7 @@
 #include "hierarchy/meta_expert.h"
 #include "hierarchy/meta_lookahead.h"
 #include "policy/policy.h"
+#include "tasks/episode_loop.h"
 #include "tasks/recording.h"
 #include "tasks/state_bank.h"
 #include "tasks/task_eval.h"
@@ -43,17 +44,37 @@ struct Decider {
   std::unique_ptr<LookaheadPlanner> lookahead;
 };
 
-uint64_t TrialSeed(uint64_t seed, int trial) {
-  return seed * 1000003ULL + static_cast<uint64_t>(trial);
-}
+// The meta policy (or the planner, or the lookahead) in the shared episode loop
+// (tasks/episode_loop.h).
+class MetaDriver : public EpisodeDriver {
+ public:
+  MetaDriver(MetaEnv* env, Decider* d, const MetaEvalOptions& o) : env_(env), d_(d), o_(o) {}
+  void Begin(int /*episode*/, uint64_t env_seed, const float* obs) override {
+    if (o_.record_routes) start_obs.assign(obs, obs + env_->spec().obs_dim);
+    if (d_->planner != nullptr) d_->planner->Reset();
+    if (d_->lookahead != nullptr) d_->lookahead->Reset(env_seed);
+  }
+  bool Act(const float* obs, Rng& rng, float* action) override {
+    if (d_->lookahead != nullptr) {
+      d_->lookahead->Act(*env_, action);
+    } else if (d_->planner != nullptr) {
+      d_->planner->Act(*env_, action);
+    } else {
+      d_->runner->Act(obs, rng, !o_.stochastic, nullptr, action);
+    }
+    return true;
+  }
+  std::vector<float> start_obs;  // --record-routes: the trial's first observation
+
+ private:
+  MetaEnv* env_;
+  Decider* d_;
+  const MetaEvalOptions& o_;
+};
 
 // One trial on `env` decided by `d` (both owned by the calling thread).
 TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int trial,
                      std::vector<PoseFrame>* frames) {
-  const uint64_t s = TrialSeed(o.seed, trial);
-  env.Seed(2 * s);
-  Rng act_rng(2 * s + 1);
-  std::vector<float> obs(env.spec().obs_dim), action(env.spec().act_dim);
   const double dt = env.humanoid().spec().control_dt;
   if (frames != nullptr) {
     env.on_control_step = [&](const HumanoidChairEnv& h, const StepResult&, int active) {
@@ -70,22 +91,9 @@ TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int tri
       sit_starts.back().set_episode(static_cast<uint64_t>(trial));
     };
   }
-  env.Reset(obs.data());
-  std::vector<float> start_obs;
-  if (o.record_routes) start_obs = obs;
-  if (d.planner != nullptr) d.planner->Reset();
-  if (d.lookahead != nullptr) d.lookahead->Reset(2 * s);
-  for (int t = 0; t < env.spec().max_episode_steps; ++t) {
-    if (d.lookahead != nullptr) {
-      d.lookahead->Act(env, action.data());
-    } else if (d.planner != nullptr) {
-      d.planner->Act(env, action.data());
-    } else {
-      d.runner->Act(obs.data(), act_rng, !o.stochastic, nullptr, action.data());
-    }
-    const StepResult r = env.Step(action.data(), obs.data());
-    if (r.terminated || r.truncated) break;
-  }
+  MetaDriver driver(&env, &d, o);
+  RunEpisode(&env, trial, o.seed, {env.spec().max_episode_steps, true}, &driver);
+  std::vector<float> start_obs = std::move(driver.start_obs);
   env.on_control_step = nullptr;
   env.on_subtask_begin = nullptr;
   const MetaEpisode& e = env.episode();

@@ -12,6 +12,7 @@
 #include "common/file_util.h"
 #include "common/paths.h"
 #include "policy/policy.h"
+#include "tasks/episode_loop.h"
 
 namespace perch {
 namespace {
@@ -142,6 +143,34 @@ EnvState EnvStateOf(const proto::BankState& b) {
   return es;
 }
 
+namespace {
+
+// An end-pose sampling episode in the shared loop (tasks/episode_loop.h): the policy acts; the
+// state after exactly o.steps steps is kept (its episode must then survive o.survive more).
+class SampleDriver : public EpisodeDriver {
+ public:
+  SampleDriver(HumanoidChairEnv* env, PolicyRunner* runner, const SampleEndPosesOptions& o)
+      : env_(env), runner_(runner), o_(o) {}
+  void Begin(int, uint64_t, const float*) override { kept.reset(); }
+  bool Act(const float* obs, Rng& rng, float* action) override {
+    runner_->Act(obs, rng, !o_.stochastic, nullptr, action);
+    return true;
+  }
+  void Stepped(const StepResult& r, int steps) override {
+    if (!r.terminated && steps == o_.steps) {
+      kept = std::make_unique<proto::BankState>(CaptureState(*env_));
+    }
+  }
+  std::unique_ptr<proto::BankState> kept;
+
+ private:
+  HumanoidChairEnv* env_;
+  PolicyRunner* runner_;
+  const SampleEndPosesOptions& o_;
+};
+
+}  // namespace
+
 proto::StateBank SampleEndPoses(const TaskEnvConfig& config, const proto::ModelWeights& weights,
                                 const SampleEndPosesOptions& o) {
   if (o.steps < 1 || o.survive < 0 || o.count < 1 || o.workers < 1) {
@@ -174,28 +203,14 @@ proto::StateBank SampleEndPoses(const TaskEnvConfig& config, const proto::ModelW
     PolicyRunner runner(pc, NormalizerConfig());
     runner.LoadWeights(weights);
     runner.set_update_obs_stats(false);  // the policy's own saved normaliser
-    std::vector<float> obs(spec.obs_dim), nxt(spec.obs_dim), act(spec.act_dim);
+    SampleDriver driver(&env, &runner, o);
     while (!stop.load()) {
       const int64_t e = next.fetch_add(1);
-      const uint64_t episode_seed = o.seed * 1000003ULL + static_cast<uint64_t>(e);
-      env.Seed(2 * episode_seed);
-      Rng act_rng(2 * episode_seed + 1);
-      env.Reset(obs.data());
-      std::unique_ptr<proto::BankState> kept;
-      bool ok = true;
-      for (int k = 1; k <= horizon; ++k) {
-        runner.Act(obs.data(), act_rng, !o.stochastic, nullptr, act.data());
-        const StepResult r = env.Step(act.data(), nxt.data());
-        obs.swap(nxt);
-        if (r.terminated) {
-          ok = false;
-          break;
-        }
-        if (k == o.steps) {
-          kept = std::make_unique<proto::BankState>(CaptureState(env));
-          kept->set_episode(static_cast<uint64_t>(e));
-        }
-      }
+      const EpisodeEnd end =
+          RunEpisode(&env, static_cast<int>(e), o.seed, {horizon, false}, &driver);
+      const bool ok = !end.fell;
+      std::unique_ptr<proto::BankState> kept = std::move(driver.kept);
+      if (kept) kept->set_episode(static_cast<uint64_t>(e));
       std::lock_guard<std::mutex> lock(mu);
       done[e] = ok ? std::move(kept) : nullptr;
       for (auto it = done.find(prefix); it != done.end(); it = done.find(prefix)) {

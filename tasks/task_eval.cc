@@ -35,56 +35,79 @@ PolicyRunner MakeEvalPolicy(const proto::ModelWeights& weights, const EnvSpec& s
   return runner;
 }
 
+namespace {
+
+// A subtask policy in the shared loop (tasks/episode_loop.h): its observer, the recorder, the
+// frames of episode 0, and the totals over all episodes.
+class PolicyDriver : public EpisodeDriver {
+ public:
+  PolicyDriver(HumanoidChairEnv* env, PolicyRunner* policy, const EvalOptions& o,
+               const EpisodeLoop& loop, EpisodeObserver* observer, EvalRecording* rec,
+               EpisodeTotals* totals)
+      : env_(env),
+        policy_(policy),
+        o_(o),
+        loop_(loop),
+        observer_(observer),
+        rec_(rec),
+        t_(totals) {}
+
+  void Begin(int episode, uint64_t env_seed, const float* /*obs*/) override {
+    episode_ = episode;
+    observer_->Begin(*env_);
+    if (o_.recorder != nullptr) o_.recorder->Begin(*env_, episode, env_seed);
+    Record(0);
+  }
+  bool Act(const float* obs, Rng& rng, float* action) override {
+    policy_->Act(obs, rng, !o_.stochastic, nullptr, action);
+    return true;
+  }
+  void Stepped(const StepResult& r, int steps) override {
+    t_->sum_return += r.reward;
+    if (r.invalid) ++t_->invalid;
+    if (!r.invalid) observer_->Observe(*env_, r, steps);
+    if (o_.recorder != nullptr) o_.recorder->Step(*env_, r);
+    Record(steps);
+  }
+
+ private:
+  void Record(int step) {
+    if (episode_ != 0 || rec_ == nullptr) return;
+    rec_->frames.push_back(PoseFrameOf(env_->humanoid_state(), step * env_->spec().control_dt));
+    if (loop_.record_targets &&
+        (rec_->targets.empty() || (rec_->targets.back() - env_->walk_target()).norm() > 1e-9)) {
+      rec_->targets.push_back(env_->walk_target());
+    }
+  }
+  HumanoidChairEnv* env_;
+  PolicyRunner* policy_;
+  const EvalOptions& o_;
+  const EpisodeLoop& loop_;
+  EpisodeObserver* observer_;
+  EvalRecording* rec_;
+  EpisodeTotals* t_;
+  int episode_ = 0;
+};
+
+}  // namespace
+
 EpisodeTotals RunEvalEpisodes(HumanoidChairEnv* env, PolicyRunner* policy, const EvalOptions& o,
                               const EpisodeLoop& loop, EpisodeObserver* observer,
                               EvalRecording* rec) {
-  const EnvSpec& spec = env->spec();
-  const double dt = spec.control_dt;
-  std::vector<float> obs(spec.obs_dim), next(spec.obs_dim), action(spec.act_dim);
+  const double dt = env->spec().control_dt;
   EpisodeTotals t;
+  PolicyDriver driver(env, policy, o, loop, observer, rec, &t);
+  const EpisodeLimits limits{loop.max_steps, loop.stop_at_truncation};
   for (int e = 0; e < o.episodes; ++e) {
-    // (Rng::Seed scrambles its seed, so nearby integers give unrelated streams.)
-    const uint64_t episode_seed = o.seed * 1000003ULL + static_cast<uint64_t>(e);
-    env->Seed(2 * episode_seed);
-    Rng act_rng(2 * episode_seed + 1);
-    env->Reset(obs.data());
-    observer->Begin(*env);
-    if (o.recorder != nullptr) o.recorder->Begin(*env, e, 2 * episode_seed);
-    auto record = [&](int step) {
-      if (e != 0 || rec == nullptr) return;
-      rec->frames.push_back(PoseFrameOf(env->humanoid_state(), step * dt));
-      if (loop.record_targets &&
-          (rec->targets.empty() || (rec->targets.back() - env->walk_target()).norm() > 1e-9)) {
-        rec->targets.push_back(env->walk_target());
-      }
-    };
-    record(0);
-    int steps = 0;
-    bool fell = false;
-    while (steps < loop.max_steps) {
-      policy->Act(obs.data(), act_rng, !o.stochastic, nullptr, action.data());
-      const StepResult r = env->Step(action.data(), next.data());
-      ++steps;
-      t.sum_return += r.reward;
-      if (r.invalid) ++t.invalid;
-      if (!r.invalid) observer->Observe(*env, r, steps);
-      if (o.recorder != nullptr) o.recorder->Step(*env, r);
-      record(steps);
-      obs.swap(next);
-      if (r.terminated) {
-        fell = true;
-        break;
-      }
-      if (r.truncated && loop.stop_at_truncation) break;
-    }
-    if (fell) {
+    const EpisodeEnd end = RunEpisode(env, e, o.seed, limits, &driver);
+    if (end.fell) {
       ++t.falls;
-      t.fall_times.push_back(steps * dt);
+      t.fall_times.push_back(end.steps * dt);
       t.fall_episodes.push_back(e);
     }
-    const bool success = observer->End(*env, e, steps, fell);
-    if (o.recorder != nullptr) o.recorder->End(success, fell);
-    t.steps += steps;
+    const bool success = observer->End(*env, e, end.steps, end.fell);
+    if (o.recorder != nullptr) o.recorder->End(success, end.fell);
+    t.steps += end.steps;
   }
   return t;
 }
@@ -172,8 +195,8 @@ double Percentile(std::vector<double> v, double p) {
   return v[std::min(v.size() - 1, static_cast<size_t>(p * (v.size() - 1) + 0.5))];
 }
 
-// Turn: success = no early termination until success_after_end_s after the clip ends, and the
-// yaw then within success_yaw_tol_deg of the reference's last frame.
+// Turn: success (the task's, TurnTask::OnStep) = no early termination until success_after_end_s
+// after the clip ends, and the yaw then within success_yaw_tol_deg of the reference's last frame.
 class TurnMetrics : public EpisodeMetrics {
  public:
   int MinEpisodeSteps(const HumanoidChairEnv& env) const override {
@@ -197,7 +220,7 @@ class TurnMetrics : public EpisodeMetrics {
     judged_ = true;
     const double err_deg = std::abs(t.last_terms().yaw_error_rad) * 180.0 / M_PI;
     yaw_err_deg_.push_back(err_deg);
-    ok_ = !r.terminated && err_deg <= t.config().success_yaw_tol_deg;
+    ok_ = r.success;  // the task judges this step (tasks/turn.cc)
   }
   bool Finish(const HumanoidChairEnv& env, bool fell) override {
     if (!fell) {
@@ -235,9 +258,9 @@ class TurnMetrics : public EpisodeMetrics {
   std::vector<double> end_speed_, travel_m_;  // [m/s], [m] per episode that did not fall
 };
 
-// Sit: success = pelvis continuously on the seat (contact rule of the env) for success_contact_s;
-// for successes, the horizontal pelvis - seat target error and the torso heading error to the
-// chair's facing direction at the moment success is reached.
+// Sit: success (the task's, SitTask::OnStep) = pelvis continuously on the seat (contact rule of the
+// env) for success_contact_s; for successes, the horizontal pelvis - seat target error and the
+// torso heading error to the chair's facing direction at the moment success is reached.
 class SitMetrics : public EpisodeMetrics {
  public:
   int MinEpisodeSteps(const HumanoidChairEnv& env) const override {
@@ -258,9 +281,7 @@ class SitMetrics : public EpisodeMetrics {
     run_ = contact ? run_ + 1 : 0;
     longest_run_ = std::max(longest_run_, run_);
     if (contact && first_contact_s_ < 0) first_contact_s_ = env.episode_step() * t.control_dt();
-    const int need =
-        static_cast<int>(std::ceil(t.config().success_contact_s / t.control_dt() - 1e-9));
-    if (!success_ && run_ >= need) {
+    if (!success_ && r.success) {  // the task's contact rule (tasks/sit.cc)
       success_ = true;
       const Eigen::Vector3d d = env.PelvisPosition() - env.SeatTargetWorld();
       pos_err_cm_.push_back(100.0 * d.head<2>().norm());

@@ -1,9 +1,10 @@
-// Evaluation of a subtask policy (perch eval --task T): one episode runner for every task
-// (seeding, mean or sampled actions, falls, the recorder, the frames of episode 0 for a filmstrip),
-// RunEvalEpisodes, and what each task measures over it: turn and sit through EpisodeMetrics
-// plug-ins (turn: heading at the end; sit: seated contact, seat position and orientation errors)
-// and EvaluateEpisodes' common JSON; walk through its own observer (tasks/walk_eval.h).
-// Definitions: docs/subtasks.md.
+// Evaluation of a subtask policy (perch eval --task T): RunEvalEpisodes runs a policy in the shared
+// episode loop (tasks/episode_loop.h, which the hierarchy's evaluations use too) with mean or
+// sampled actions, falls, the recorder and the frames of episode 0 for a filmstrip; and what each
+// task measures over it (success is the task's StepResult::success, read by the metrics): turn and
+// sit through EpisodeMetrics plug-ins (turn: heading at the end; sit: seated contact, seat position
+// and orientation errors) and EvaluateEpisodes' common JSON; walk through its own observer
+// (tasks/walk_eval.h). Definitions: docs/subtasks.md.
 #pragma once
 
 #include <cstdint>
@@ -16,6 +17,7 @@
 #include "envs/humanoid_env.h"
 #include "envs/pose_frame.h"
 #include "policy/policy.h"
+#include "tasks/episode_loop.h"
 #include "tasks/foot_sliding.h"
 #include "tasks/recording.h"
 #include "tasks/task_env.h"
@@ -90,9 +92,8 @@ struct EpisodeTotals {
 PolicyRunner MakeEvalPolicy(const proto::ModelWeights& weights, const EnvSpec& spec,
                             const std::string& task);
 
-// Runs o.episodes episodes of `policy` on `env`. Episode e depends only on (o.seed, e): the env is
-// seeded with 2 s and the actions' noise with 2 s + 1, s = seed * 1000003 + e, so any episode can
-// be rerun alone.
+// Runs o.episodes episodes of `policy` on `env` in the shared loop (tasks/episode_loop.h: episode
+// e depends only on (o.seed, e), so any episode can be rerun alone).
 EpisodeTotals RunEvalEpisodes(HumanoidChairEnv* env, PolicyRunner* policy, const EvalOptions& o,
                               const EpisodeLoop& loop, EpisodeObserver* observer,
                               EvalRecording* rec);

@@ -78,6 +78,49 @@ TEST(Hierarchy, TerminationHeightFollowsTheActiveSubtask) {
   EXPECT_EQ(SitChairTaskConfig().sit_min_root_z, 0.54);
 }
 
+// The hierarchy's success is judged in one place, the task's step (the chain and the meta env read
+// StepResult::success): once, at the step the seated contact has lasted success_contact_s; its
+// counters can be saved and restored (MetaEnvState carries them for the lookahead).
+TEST(Hierarchy, SuccessIsTheTasksOnceAfterTheSeatedContactTime) {
+  auto env = MakeTaskHumanoidEnv(TaskEnvConfig::FromJson(
+      {{"task", "sit_chair"},
+       {"spawn", {{"zone", 1}}},
+       {"sit_chair", {{"success_contact_s", 1.0}, {"max_episode_steps", 200}}}},
+      "t"));
+  auto& task = const_cast<SitChairTask&>(dynamic_cast<const SitChairTask&>(env->task()));
+  EXPECT_TRUE(env->spec().has_success);
+  std::vector<float> obs(env->spec().obs_dim), zero(21, 0.0f);
+  env->Seed(4);
+  env->Reset(obs.data());
+  env->ResetToState(SeatedPose(env->model(), *env->chair(), env->config().chair_placement, 0.005),
+                    obs.data());
+  task.set_active(kSit);
+  const int need = 60;  // 1 s at 60 Hz
+  int run = 0, want = -1, got = -1, count = 0;
+  SitChairTask::Seated before_success;
+  for (int k = 1; k <= 150; ++k) {
+    if (k == need - 5) before_success = task.seated();
+    const StepResult r = env->Step(zero.data(), obs.data());
+    run = env->PelvisSeatContact() ? run + 1 : 0;
+    if (want < 0 && run >= need) want = k;
+    EXPECT_EQ(task.seated().run, run);
+    if (r.success) {
+      ++count;
+      got = k;
+    }
+  }
+  ASSERT_GT(want, 0) << "the seated body stays on the seat for 1 s";
+  EXPECT_EQ(got, want);
+  EXPECT_EQ(count, 1);
+  EXPECT_TRUE(task.seated().succeeded);
+  // Restored to before the success, the success comes again; a new episode starts from nothing.
+  task.set_seated(before_success);
+  EXPECT_FALSE(task.seated().succeeded);
+  env->Reset(obs.data());
+  EXPECT_EQ(task.seated().run, 0);
+  EXPECT_FALSE(task.seated().succeeded);
+}
+
 TEST(Hierarchy, SubtaskPoliciesRefuseAModelOfAnotherObservationByName) {
   auto models = UntrainedSet();
   models[kSit] = Untrained(52, 9);
