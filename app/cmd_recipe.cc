@@ -10,10 +10,9 @@
 
 namespace perch {
 
-void RegisterRecipeCommands(CLI::App& root, CLI::App& /*bench*/) {
-  CLI::App* recipe = root.add_subcommand("recipe", "Training recipes: every stage in one command");
-  recipe->require_subcommand(1);
+namespace {
 
+void RegisterRecipeRun(CLI::App* recipe) {
   auto f = std::make_shared<RecipeRunFlags>();
   CLI::App* run = recipe->add_subcommand(
       "run", "Run a recipe's stages in order in --dir; run again to continue after a stop");
@@ -58,7 +57,9 @@ void RegisterRecipeCommands(CLI::App& root, CLI::App& /*bench*/) {
     const int code = RunRecipe(*f);
     if (code != 0) std::exit(code);
   });
+}
 
+void RegisterRecipeWorker(CLI::App* recipe) {
   auto w = std::make_shared<RecipeWorkerFlags>();
   auto w_check = std::make_shared<bool>(false);
   CLI::App* worker = recipe->add_subcommand(
@@ -81,7 +82,9 @@ void RegisterRecipeCommands(CLI::App& root, CLI::App& /*bench*/) {
     const int code = RunRecipeWorker(*w);
     if (code != 0) std::exit(code);
   });
+}
 
+void RegisterRecipeStatus(CLI::App* recipe) {
   auto dir = std::make_shared<std::string>();
   auto json = std::make_shared<bool>(false);
   CLI::App* status = recipe->add_subcommand(
@@ -96,6 +99,25 @@ void RegisterRecipeCommands(CLI::App& root, CLI::App& /*bench*/) {
       std::cout << RecipeStatusText(s);
     }
   });
+}
+
+void RegisterRecipeFields(CLI::App* recipe) {
+  auto json = std::make_shared<bool>(false);
+  CLI::App* fields = recipe->add_subcommand(
+      "fields", "A recipe stage's fields: name, default, range, doc (docs/recipe.md)");
+  fields->add_flag("--json", *json, "print the table as JSON");
+  fields->callback([json] { std::cout << RecipeFieldsText(*json); });
+}
+
+}  // namespace
+
+void RegisterRecipeCommands(CLI::App& root, CLI::App& /*bench*/) {
+  CLI::App* recipe = root.add_subcommand("recipe", "Training recipes: every stage in one command");
+  recipe->require_subcommand(1);
+  RegisterRecipeRun(recipe);
+  RegisterRecipeWorker(recipe);
+  RegisterRecipeStatus(recipe);
+  RegisterRecipeFields(recipe);
 }
 
 }  // namespace perch

@@ -25,38 +25,6 @@ bool ValidName(const std::string& s) {
   return s != "out" && s != "dir";
 }
 
-StageSelect SelectFromJson(const Json& j, const std::string& ctx) {
-  if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(
-      j, {"last_k", "milestones", "episodes", "seed", "metric", "lower_is_better", "args"}, ctx);
-  StageSelect s;
-  GetOptional(j, "last_k", s.last_k, ctx);
-  GetOptional(j, "milestones", s.milestones, ctx);
-  GetOptional(j, "episodes", s.episodes, ctx);
-  GetOptional(j, "seed", s.seed, ctx);
-  GetOptional(j, "metric", s.metric, ctx);
-  GetOptional(j, "lower_is_better", s.lower_is_better, ctx);
-  GetOptional(j, "args", s.args, ctx);
-  if (s.last_k < 0 || s.last_k > 50) throw ConfigError(ctx + ".last_k: must be in 0..50");
-  if (s.episodes < 1) throw ConfigError(ctx + ".episodes: must be >= 1");
-  if (s.milestones && s.last_k < 1) {
-    throw ConfigError(ctx + ".milestones: needs last_k >= 1 (a selection by evaluation)");
-  }
-  return s;
-}
-
-Json ToJson(const StageSelect& s) {
-  Json j{{"last_k", s.last_k},
-         {"episodes", s.episodes},
-         {"seed", s.seed},
-         {"metric", s.metric},
-         {"lower_is_better", s.lower_is_better},
-         {"args", s.args}};
-  // Written only when on, so that the recipes before it keep their fingerprints.
-  if (s.milestones) j["milestones"] = true;
-  return j;
-}
-
 // Sets are written in the recipe as an object {"section.field": VALUE} (easier to read than
 // "k=v" strings); VALUE is any JSON.
 std::vector<std::string> SetsFromJson(const Json& j, const std::string& ctx) {
@@ -69,15 +37,195 @@ std::vector<std::string> SetsFromJson(const Json& j, const std::string& ctx) {
   return out;
 }
 
+// The cross-field rules of a stage (its fields' own ranges are in the table).
+std::string StageRules(const RecipeStage& s, const std::string& c) {
+  if (s.shards > 1) {
+    if (s.kind != "eval" || !s.counts.count("--trials")) {
+      return c +
+             ".shards: only an eval stage of --trials (perch eval --task sit_chair) runs in "
+             "shards";
+    }
+    if (!s.outputs.empty()) {
+      return c +
+             ".shards: a sharded evaluation writes only its result (a hand-over bank needs "
+             "every trial in one run)";
+    }
+  }
+  for (const auto& [flag, n] : s.counts) {
+    if (flag.rfind("--", 0) != 0) return c + ".counts: \"" + flag + "\" is not a --flag";
+    if (n < 1) return c + ".counts." + flag + ": must be >= 1";
+  }
+  if (s.kind == "train") {
+    if (s.config.empty()) return c + ": a train stage needs \"config\"";
+    if (s.max_samples == 0 && s.target_success == 0) {
+      return c + ": a train stage needs a stop rule (max_samples and/or target_success)";
+    }
+    if (s.max_samples == 0) {
+      return c +
+             ".max_samples: a train stage needs a budget (target_success alone may never be "
+             "reached)";
+    }
+    if (!s.command.empty()) return c + ".command: a train stage runs perch train";
+  } else {
+    if (s.max_samples || s.target_success || s.target_window || s.select.last_k) {
+      return c + ": max_samples, target_success, target_window and select are for train stages";
+    }
+    if (s.kind == "run" && s.command.empty()) {
+      return c + ": a run stage needs \"command\" (a perch subcommand)";
+    }
+  }
+  for (const std::string& o : s.optional_outputs) {
+    if (!s.outputs.count(o)) return c + ".optional_outputs: \"" + o + "\" is not in outputs";
+  }
+  for (const auto& [name, file] : s.outputs) {
+    if (!ValidName(name)) return c + ".outputs: bad output name \"" + name + "\"";
+    if (file.empty() || file.find('/') != std::string::npos || file[0] == '.') {
+      return c + ".outputs." + name + ": a plain file name inside the stage's directory";
+    }
+  }
+  return "";
+}
+
+// A `set`/`toy_set` object {"section.field": VALUE} as a field (SetsFromJson): held as the
+// "section.field=VALUE" strings `--set` takes.
+template <class T>
+void AddSets(FieldTable<T>& t, const char* name, std::vector<std::string> T::*member,
+             const char* doc) {
+  const std::string key = name;
+  t.Custom(
+      name, doc,
+      [key, member](const Json& j, T& v, const std::string& ctx) {
+        v.*member = SetsFromJson(j.at(key), ctx + "." + key);
+      },
+      [key, member](const T& v, Json& j) {
+        if ((v.*member).empty()) return;
+        Json o = Json::object();
+        for (const std::string& kv : v.*member) {
+          const size_t eq = kv.find('=');
+          const std::string value = kv.substr(eq + 1);
+          o[kv.substr(0, eq)] = Json::accept(value) ? Json::parse(value) : Json(value);
+        }
+        j[key] = o;
+      });
+}
+
+}  // namespace
+
+const FieldTable<StageSelect>& StageSelectFields() {
+  static const FieldTable<StageSelect> t =
+      FieldTable<StageSelect>()
+          .Add("last_k", &StageSelect::last_k,
+               "evaluate the newest K checkpoints and deliver the best (0: the newest, unjudged)",
+               InRange(0, 50, "must be in 0..50"))
+          .Custom(
+              "milestones", "also evaluate every milestone checkpoint the run kept",
+              [](const Json& j, StageSelect& s, const std::string& ctx) {
+                GetOptional(j, "milestones", s.milestones, ctx);
+              },
+              // Written only when on, so that the recipes before it keep their fingerprints.
+              [](const StageSelect& s, Json& j) {
+                if (s.milestones) j["milestones"] = true;
+              })
+          .Add("episodes", &StageSelect::episodes, "episodes per candidate",
+               Satisfies<int>([](const int& v) { return v >= 1; }, "must be >= 1"))
+          .Add("seed", &StageSelect::seed, "the selection seed (figures are reported on another)")
+          .Add("metric", &StageSelect::metric, "the perch eval --json key ranked")
+          .Add("lower_is_better", &StageSelect::lower_is_better, "rank the metric ascending")
+          .Add("args", &StageSelect::args, "further perch eval flags")
+          .Rule([](const StageSelect& s, const std::string& ctx) {
+            if (s.milestones && s.last_k < 1) {
+              return ctx + ".milestones: needs last_k >= 1 (a selection by evaluation)";
+            }
+            return std::string();
+          });
+  return t;
+}
+
+const FieldTable<RecipeStage>& RecipeStageFields() {
+  static const FieldTable<RecipeStage> t = [] {
+    FieldTable<RecipeStage> t;
+    t.Custom(
+         "name", "the stage's name (required): letters, digits, '_', '-'",
+         [](const Json& j, RecipeStage& s, const std::string& ctx) {
+           GetRequired(j, "name", s.name, ctx);
+         },
+         [](const RecipeStage& s, Json& j) { j["name"] = s.name; })
+        .Custom(
+            "kind", "train, sample, mirror, clone, eval or run (required)",
+            [](const Json& j, RecipeStage& s, const std::string& ctx) {
+              GetRequired(j, "kind", s.kind, ctx);
+            },
+            [](const RecipeStage& s, Json& j) { j["kind"] = s.kind; })
+        .Add("command", &RecipeStage::command, "the perch subcommand (default per kind)")
+        .Add("doc", &RecipeStage::doc, "why the stage is there, shown when it starts")
+        .Add("config", &RecipeStage::config, "the base config file (train stages)");
+    AddSets(t, "set", &RecipeStage::sets, "overrides of the config: {\"section.field\": VALUE}");
+    t.Add("args", &RecipeStage::args, "further flags of the command")
+        .Custom(
+            "toy_args", "replace args in a toy run (--scale < 1)",
+            [](const Json& j, RecipeStage& s, const std::string& ctx) {
+              GetOptional(j, "toy_args", s.toy_args, ctx);
+              s.has_toy_args = true;
+            },
+            [](const RecipeStage& s, Json& j) {
+              if (s.has_toy_args) j["toy_args"] = s.toy_args;
+            });
+    AddSets(t, "toy_set", &RecipeStage::toy_sets, "added to set in a toy run");
+    t.Add("counts", &RecipeStage::counts,
+          "{\"--flag\": N}: episodes, trials or states, multiplied by --scale")
+        .Add("min_count", &RecipeStage::min_count, "the floor of a scaled count",
+             Satisfies<int64_t>([](const int64_t& v) { return v >= 1; }, "must be >= 1"))
+        .Add("max_samples", &RecipeStage::max_samples, "a train stage's sample budget",
+             Satisfies<int64_t>([](const int64_t& v) { return v >= 0; }, "must be >= 0"))
+        .Add("target_success", &RecipeStage::target_success,
+             "end a train stage earlier at this success rate (0: off)",
+             Satisfies<double>([](const double& v) { return v >= 0 && v <= 1; },
+                               "must be in [0, 1]"))
+        .Add("target_window", &RecipeStage::target_window,
+             "episodes the target success is judged over (0: the config's)")
+        .Add("actors", &RecipeStage::actors, "actor processes (0: the runner's --actors)",
+             InRange(0, 256, "must be in 0..256"))
+        .Nested("select", &RecipeStage::select, StageSelectFields(),
+                "how a train stage's delivered checkpoint is chosen")
+        .Add("outputs", &RecipeStage::outputs,
+             "{NAME: FILE} outputs beyond the kind's own (docs/recipe.md)")
+        .Add("optional_outputs", &RecipeStage::optional_outputs,
+             "outputs the command may rightly leave unwritten")
+        .Add("figures", &RecipeStage::figures, "keys copied from the stage's JSON result")
+        .Add("est_wall_s", &RecipeStage::est_wall_s, "full-scale wall time on 2 cores [s] (ETA)")
+        .Add("shards", &RecipeStage::shards, "an eval stage of --trials in this many shards",
+             InRange(1, 1000, "must be in 1..1000"));
+    return t;
+  }();
+  return t;
+}
+
+std::string RecipeFieldsText(bool json) {
+  const Json stage = RecipeStageFields().Describe();
+  if (json) return Json{{"stage", stage}}.dump(2) + "\n";
+  std::string out;
+  std::function<void(const Json&, const std::string&)> rows = [&](const Json& t,
+                                                                  const std::string& prefix) {
+    for (const Json& r : t) {
+      const std::string name = prefix + r["name"].get<std::string>();
+      if (r.contains("fields")) {
+        rows(r["fields"], name + ".");
+        continue;
+      }
+      out += name + "  " + (r.contains("default") ? r["default"].dump() : "") + "  " +
+             r.value("rule", "") + "  " + r.value("doc", "") + "\n";
+    }
+  };
+  rows(stage, "stages[].");
+  return out;
+}
+
+namespace {
+
+Json ToJson(const StageSelect& s) { return StageSelectFields().Write(s); }
+
 RecipeStage StageFromJson(const Json& j, const std::string& ctx) {
   if (!j.is_object()) throw ConfigError(ctx + ": expected an object");
-  CheckKnownKeys(j, {"name",       "kind",        "command",        "doc",
-                     "config",     "set",         "args",           "counts",
-                     "min_count",  "max_samples", "target_success", "target_window",
-                     "actors",     "select",      "outputs",        "figures",
-                     "est_wall_s", "toy_args",    "toy_set",        "optional_outputs",
-                     "shards"},
-                 ctx);
   RecipeStage s;
   GetRequired(j, "name", s.name, ctx);
   GetRequired(j, "kind", s.kind, ctx);
@@ -89,85 +237,9 @@ RecipeStage StageFromJson(const Json& j, const std::string& ctx) {
     throw ConfigError(c + ".kind: \"" + s.kind +
                       "\" is not one of train, sample, mirror, clone, eval, run");
   }
-  GetOptional(j, "command", s.command, c);
-  GetOptional(j, "doc", s.doc, c);
-  GetOptional(j, "config", s.config, c);
-  if (j.contains("set")) s.sets = SetsFromJson(j["set"], c + ".set");
-  GetOptional(j, "args", s.args, c);
-  if (j.contains("toy_args")) {
-    GetOptional(j, "toy_args", s.toy_args, c);
-    s.has_toy_args = true;
-  }
-  if (j.contains("toy_set")) s.toy_sets = SetsFromJson(j["toy_set"], c + ".toy_set");
-  GetOptional(j, "counts", s.counts, c);
-  GetOptional(j, "min_count", s.min_count, c);
-  GetOptional(j, "max_samples", s.max_samples, c);
-  GetOptional(j, "target_success", s.target_success, c);
-  GetOptional(j, "target_window", s.target_window, c);
-  GetOptional(j, "actors", s.actors, c);
-  if (j.contains("select")) s.select = SelectFromJson(j["select"], c + ".select");
-  GetOptional(j, "outputs", s.outputs, c);
-  GetOptional(j, "optional_outputs", s.optional_outputs, c);
-  GetOptional(j, "figures", s.figures, c);
-  GetOptional(j, "est_wall_s", s.est_wall_s, c);
-  GetOptional(j, "shards", s.shards, c);
-  if (s.shards < 1 || s.shards > 1000) throw ConfigError(c + ".shards: must be in 1..1000");
-  if (s.shards > 1) {
-    if (s.kind != "eval" || !s.counts.count("--trials")) {
-      throw ConfigError(c +
-                        ".shards: only an eval stage of --trials (perch eval --task "
-                        "sit_chair) runs in shards");
-    }
-    if (!s.outputs.empty()) {
-      throw ConfigError(c +
-                        ".shards: a sharded evaluation writes only its result (a hand-over "
-                        "bank needs every trial in one run)");
-    }
-  }
-  for (const auto& [flag, n] : s.counts) {
-    if (flag.rfind("--", 0) != 0)
-      throw ConfigError(c + ".counts: \"" + flag + "\" is not a --flag");
-    if (n < 1) throw ConfigError(c + ".counts." + flag + ": must be >= 1");
-  }
-  if (s.min_count < 1) throw ConfigError(c + ".min_count: must be >= 1");
-  if (s.max_samples < 0) throw ConfigError(c + ".max_samples: must be >= 0");
-  if (!(s.target_success >= 0 && s.target_success <= 1)) {
-    throw ConfigError(c + ".target_success: must be in [0, 1]");
-  }
-  if (s.actors < 0 || s.actors > 256) throw ConfigError(c + ".actors: must be in 0..256");
-  if (s.kind == "train") {
-    if (s.config.empty()) throw ConfigError(c + ": a train stage needs \"config\"");
-    if (s.max_samples == 0 && s.target_success == 0) {
-      throw ConfigError(c +
-                        ": a train stage needs a stop rule (max_samples and/or target_success)");
-    }
-    if (s.max_samples == 0) {
-      throw ConfigError(c +
-                        ".max_samples: a train stage needs a budget (target_success alone may "
-                        "never be reached)");
-    }
-    if (!s.command.empty()) throw ConfigError(c + ".command: a train stage runs perch train");
-  } else {
-    if (s.max_samples || s.target_success || s.target_window || s.select.last_k) {
-      throw ConfigError(c +
-                        ": max_samples, target_success, target_window and select are for train "
-                        "stages");
-    }
-    if (s.kind == "run" && s.command.empty()) {
-      throw ConfigError(c + ": a run stage needs \"command\" (a perch subcommand)");
-    }
-  }
-  for (const std::string& o : s.optional_outputs) {
-    if (!s.outputs.count(o))
-      throw ConfigError(c + ".optional_outputs: \"" + o + "\" is not in outputs");
-  }
-  for (const auto& [name, file] : s.outputs) {
-    if (!ValidName(name)) throw ConfigError(c + ".outputs: bad output name \"" + name + "\"");
-    if (file.empty() || file.find('/') != std::string::npos || file[0] == '.') {
-      throw ConfigError(c + ".outputs." + name +
-                        ": a plain file name inside the stage's directory");
-    }
-  }
+  s = RecipeStageFields().Read(j, c);
+  const std::string e = StageRules(s, c);
+  if (!e.empty()) throw ConfigError(e);
   return s;
 }
 

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "common/field_table.h"
 #include "common/json_util.h"
 
 namespace perch {
@@ -31,15 +32,15 @@ struct StageSelect {
   std::vector<std::string> args;        // more perch eval flags (e.g. --task walk)
 };
 
-// One stage. Strings in `sets` and `args` may hold references "${STAGE.OUTPUT}" (an earlier
-// stage's output file), "${out.OUTPUT}" (this stage's own output file) and "${dir}" (this stage's
-// directory); the stages a stage reads from are its dependencies.
 // The checkpoints a selection evaluates, oldest first, from a run's checkpoint files (sorted by
 // update; the run keeps its milestones and its newest keep_last): the newest last_k (at least
 // one), and with milestones every file.
 std::vector<std::string> SelectionCandidates(const std::vector<std::string>& checkpoints,
                                              const StageSelect& select);
 
+// One stage. Strings in `sets` and `args` may hold references "${STAGE.OUTPUT}" (an earlier
+// stage's output file), "${out.OUTPUT}" (this stage's own output file) and "${dir}" (this stage's
+// directory); the stages a stage reads from are its dependencies.
 struct RecipeStage {
   std::string name;
   std::string kind;     // train, sample, mirror, clone, eval, run
@@ -81,6 +82,15 @@ struct RecipeStage {
   int shards = 1;
   std::vector<std::string> deps;  // derived from the references, in stage order
 };
+
+// A stage's and its select's fields, each written once (common/field_table.h): reading (unknown
+// keys refused, ranges checked; the rules across fields are StageFromJson's), writing, and
+// `perch recipe fields`.
+const FieldTable<StageSelect>& StageSelectFields();
+const FieldTable<RecipeStage>& RecipeStageFields();
+// The format's fields as `perch recipe fields` prints them: one line each (name, default, rule,
+// doc; select's under "select."), or the tables as JSON.
+std::string RecipeFieldsText(bool json);
 
 // Shard k of `trials` split `shards` ways: its first trial and count; empty shards left out.
 struct TrialShard {

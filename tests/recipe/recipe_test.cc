@@ -340,3 +340,50 @@ TEST(Recipe, ExtensionAcceptsOnlyWhatLeavesTheTrainedPrefixAlone) {
 
 }  // namespace
 }  // namespace perch
+
+namespace perch {
+namespace {
+
+// The recipe format's fields are written once, in RecipeStageFields(): every key the delivered
+// recipe uses is a row; what the table writes reads back to the same stage; a key it does not
+// list is refused naming it; and the rows are what `perch recipe fields` prints.
+TEST(RecipeFormat, EveryStageFieldIsReadAndWrittenByItsTable) {
+  const std::string path = std::string(PERCH_SOURCE_DIR) + "/recipes/sit_chair.json";
+  const Json file = LoadJsonFile(path);
+  const Recipe r = LoadRecipe(path);
+  const std::vector<std::string> names = RecipeStageFields().Names();
+  ASSERT_EQ(r.stages.size(), file["stages"].size());
+  for (size_t i = 0; i < r.stages.size(); ++i) {
+    for (auto it = file["stages"][i].begin(); it != file["stages"][i].end(); ++it) {
+      EXPECT_THAT(names, ::testing::Contains(it.key())) << r.stages[i].name;
+    }
+    const Json written = RecipeStageFields().Write(r.stages[i]);
+    const RecipeStage again = RecipeStageFields().Read(written, "again");
+    EXPECT_EQ(RecipeStageFields().Write(again), written) << r.stages[i].name;
+    EXPECT_EQ(again.sets, r.stages[i].sets) << r.stages[i].name;
+    EXPECT_EQ(again.toy_sets, r.stages[i].toy_sets) << r.stages[i].name;
+    EXPECT_EQ(again.has_toy_args, r.stages[i].has_toy_args) << r.stages[i].name;
+    EXPECT_EQ(again.select.milestones, r.stages[i].select.milestones) << r.stages[i].name;
+    EXPECT_EQ(again.counts, r.stages[i].counts) << r.stages[i].name;
+  }
+  Json bad = ThreeStages();
+  bad["stages"][1]["select"] = {{"last_k", 2}, {"episdoes", 5}};
+  EXPECT_THAT(ErrorOf(bad), ::testing::HasSubstr("unknown field 'episdoes'"));
+  bad = ThreeStages();
+  bad["stages"][0]["select"] = {{"last_k", 51}};
+  EXPECT_THAT(ErrorOf(bad), ::testing::HasSubstr("(walk).select.last_k: must be in 0..50"));
+  bad = ThreeStages();
+  bad["stages"][0]["actors"] = 300;
+  EXPECT_THAT(ErrorOf(bad), ::testing::HasSubstr("(walk).actors: must be in 0..256"));
+  // The printed table: one line per field, select's nested.
+  const std::string text = RecipeFieldsText(false);
+  for (const std::string& n : names) {
+    if (n == "select") continue;
+    EXPECT_THAT(text, ::testing::HasSubstr("stages[]." + n + "  ")) << n;
+  }
+  EXPECT_THAT(text, ::testing::HasSubstr("stages[].select.last_k  0  must be in 0..50"));
+  EXPECT_EQ(Json::parse(RecipeFieldsText(true))["stage"].size(), names.size());
+}
+
+}  // namespace
+}  // namespace perch
