@@ -30,6 +30,9 @@ void RegisterRecipeRun(CLI::App* recipe) {
                   "past the samples it trained may change too): it continues from its newest "
                   "checkpoint, and the stages that read it are redone (files to DIR/superseded/); "
                   "with its budget unchanged, a changed select: its checkpoint is chosen again");
+  run->add_option("--adopt-from", f->adopt_from,
+                  "take the stages another directory of this recipe finished with the same "
+                  "definition and inputs (a second seed's, a variant's): copied in, not run");
   run->add_option("--set", f->options.sets,
                   "override a field of every stage's config: section.field=VALUE (repeatable)");
   run->add_option("--scale", f->options.scale,

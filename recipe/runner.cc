@@ -319,6 +319,7 @@ class Runner {
   bool SelectCheckpoint(const RecipeStage& s, const std::vector<std::string>& cand, Live* live,
                         std::string* chosen, Json* figures);
   void Extend(const std::string& name);
+  void Adopt();
   // Run()'s steps: every done stage's outputs still as recorded; the changed stages said (and
   // with --force-from, the stages to redo returned); --from/--until checked; the loop.
   void VerifyOutputs();
@@ -938,6 +939,70 @@ void Runner::VerifyOutputs() {
   }
 }
 
+// --adopt-from E: in recipe order up to --until, each stage that E finished with the fingerprint it
+// has here (its inputs' recorded SHA-256 included, so a stage follows only adopted or identical
+// inputs) and that is not done here with that fingerprint is copied from E; what this directory had
+// of it moves to superseded/.
+void Runner::Adopt() {
+  if (f_.adopt_from.empty()) return;
+  const std::string from = fs::absolute(f_.adopt_from).lexically_normal().string();
+  std::error_code same_ec;
+  if (fs::equivalent(from, dir_, same_ec)) {
+    throw ConfigError("--adopt-from: " + from + " is --dir itself");
+  }
+  if (!fs::exists(from + "/recipe-state.json")) {
+    throw ConfigError("--adopt-from: " + from +
+                      " has no recipe-state.json (not a recipe directory)");
+  }
+  const RecipeState other = LoadRecipeState(from);
+  int adopted = 0;
+  // Up to --until: the stages this run is asked for (and those before them).
+  const int until = f_.until.empty() || r_.Index(f_.until) < 0
+                        ? static_cast<int>(r_.stages.size()) - 1
+                        : r_.Index(f_.until);
+  for (int i = 0; i <= until; ++i) {
+    const RecipeStage& s = r_.stages[i];
+    const std::string fp = Fingerprint(s);
+    if (fp.empty()) continue;  // an input not done here
+    auto mine = state_.stages.find(s.name);
+    if (mine != state_.stages.end() && mine->second.state == "done" &&
+        mine->second.fingerprint == fp) {
+      continue;
+    }
+    auto theirs = other.stages.find(s.name);
+    if (theirs == other.stages.end() || theirs->second.state != "done" ||
+        theirs->second.fingerprint != fp) {
+      continue;
+    }
+    StageRecord rec = theirs->second;
+    for (const auto& [name, rel] : rec.outputs) {
+      const std::string p = from + "/" + rel;
+      if (!fs::exists(p) || FileSha256(p) != rec.output_sha256[name]) {
+        throw ConfigError("--adopt-from: stage " + s.name + ": output " + name + " (" + p +
+                          ") is missing or changed since " + from + " recorded it");
+      }
+    }
+    if (f_.check) {
+      std::cerr << "[recipe] " << s.name << ": would be adopted from " << from << "\n";
+      continue;
+    }
+    if (mine != state_.stages.end() && mine->second.state != "pending") MoveAside({s.name});
+    std::error_code ec;
+    fs::remove_all(StageDir(s.name), ec);
+    fs::copy(from + "/" + s.name, StageDir(s.name), fs::copy_options::recursive, ec);
+    if (ec) {
+      throw ConfigError("--adopt-from: cannot copy " + from + "/" + s.name + ": " + ec.message());
+    }
+    rec.figures["adopted_from"] = from;
+    state_.stages[s.name] = rec;
+    Save();
+    ++adopted;
+    std::cerr << "[recipe] " << s.name << ": adopted from " << from
+              << " (the same definition and inputs; not run here)\n";
+  }
+  std::cerr << "[recipe] --adopt-from " << from << ": " << adopted << " stage(s) adopted\n";
+}
+
 // Stages whose config, inputs or scale changed, said before anything runs.
 std::vector<std::string> Runner::AcceptChanges() {
   for (const RecipeStage& s : r_.stages) fingerprints_[s.name] = Fingerprint(s);
@@ -1127,6 +1192,7 @@ int Runner::Run() {
     throw ConfigError("--force-from: no stage \"" + f_.force_from + "\" in " + r_.path);
   }
   if (!f_.extend.empty()) Extend(f_.extend);
+  Adopt();
   const std::vector<std::string> redo = AcceptChanges();
   SetRange();
   // Every stage has a record (pending until it starts), so the state file lists them all.

@@ -20,6 +20,10 @@ struct RecipeRunFlags {
   // Accept a training stage's larger budget (and learning rates past what it trained): it
   // continues from its newest checkpoint; the stages that read it are redone.
   std::string extend;
+  // Take the stages (up to --until) another directory of the same recipe finished with the same
+  // definition and inputs (the same fingerprint: a second seed's directory, a variant's): their
+  // files are copied in, their records kept (figures.adopted_from), and they do not run here.
+  std::string adopt_from;
   int parallel = 1;          // independent stages run side by side
   double progress_s = 10.0;  // console progress period
   std::string exe;           // the perch program (default: this one)

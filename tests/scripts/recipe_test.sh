@@ -6,7 +6,8 @@
 #  B. the whole recipe at --scale 0.0001, killed inside a training stage and resumed: every stage
 #     ends done, each stage's inputs are the recorded outputs of the stages it names, status reports
 #     every stage; then a changed stage config and a changed output are refused before anything
-#     runs, and --force-from accepts the change.
+#     runs, and --force-from accepts the change; --adopt-from: a second directory takes the
+#     finished stages of the same definition and inputs;
 # Usage: recipe_test.sh SOURCE_DIR PERCH_BIN
 set -euo pipefail
 src=$(cd "$1" && pwd)
@@ -190,6 +191,38 @@ for s in recipe["stages"]:
         assert open(chosen, "rb").read() == open(os.path.join(d, s["name"], "policy.bin"), "rb").read()
 print("B: %d stages done, %d references checked" % (len(names), checked))
 PY
+
+# --adopt-from: another directory takes B's finished stages whose definition and inputs are the
+# same, without running them (no stage log of its own); with another seed none is the same, so
+# walk1 trains there.
+AD=$tmp/adopt
+"$bin" recipe run recipes/sit_chair.json --dir "$AD" --actors 1 --scale 0.0001 --until eval_sit \
+  --adopt-from "$B" > "$tmp/adopt.log" 2>&1 || fail "adopt: --adopt-from: $(tail -20 "$tmp/adopt.log")"
+python3 - "$B" "$AD" << 'PY' || fail "adopt: adopted stages"
+import json, os, sys
+b, c = sys.argv[1:]
+sb = json.load(open(os.path.join(b, "recipe-state.json")))["stages"]
+sc = json.load(open(os.path.join(c, "recipe-state.json")))["stages"]
+names = [s["name"] for s in json.load(open(os.path.join(c, "recipe.json")))["stages"]]
+upto = names[: names.index("eval_sit") + 1]
+for n in upto:
+    assert sc[n]["state"] == "done", (n, sc[n])
+    assert sc[n]["fingerprint"] == sb[n]["fingerprint"], n
+    assert sc[n]["output_sha256"] == sb[n]["output_sha256"], n
+    assert sc[n]["figures"]["adopted_from"] == os.path.realpath(b), (n, sc[n]["figures"])
+    for rel in sc[n]["outputs"].values():
+        assert os.path.isfile(os.path.join(c, rel)), rel
+for n in names[len(upto):]:
+    assert sc.get(n, {}).get("state", "pending") == "pending", n
+PY
+grep -q "stage(s) adopted" "$tmp/adopt.log" || fail "adopt: no adoption summary"
+"$bin" recipe run recipes/sit_chair.json --dir "$tmp/adopt7" --actors 1 --scale 0.0001 --until walk1 \
+  --set seed=7 --adopt-from "$B" > "$tmp/adopt7.log" 2>&1 || fail "adopt (seed 7): $(tail -20 "$tmp/adopt7.log")"
+state "$tmp/adopt7" "
+w=d['stages']['walk1']
+assert w['state']=='done' and 'adopted_from' not in w['figures'], w
+" || fail "adopt (seed 7): walk1 of another seed was adopted"
+grep -q "0 stage(s) adopted" "$tmp/adopt7.log" || fail "adopt (seed 7): $(cat "$tmp/adopt7.log")"
 
 # A changed stage config is refused before anything runs, naming the stage and what follows it.
 python3 - "$src/recipes/sit_chair.json" "$tmp/changed.json" << 'PY'
