@@ -87,6 +87,21 @@ void AddEvalEpisodeFlags(CLI::App* cmd, EvalCommand* o) {
                 "sample actions instead of the Gaussian's mean");
   cmd->add_option("--no-fall-seconds", o->eval.no_fall_s, "walk: no-fall window [s]")
       ->check(CLI::PositiveNumber);
+  // Robustness (issue 49): the figures are the perturbed episodes'; the same episodes also run
+  // unperturbed, and flip_rate is the share whose outcome differs.
+  cmd->add_option("--push", o->eval.perturb.push_n,
+                  "a horizontal push of F N on the pelvis, random direction, at a random step")
+      ->check(CLI::Range(0.0, 10000.0));
+  cmd->add_option("--push-seconds", o->eval.perturb.push_s, "--push: its duration [s]")
+      ->check(CLI::Range(0.001, 10.0));
+  cmd->add_option("--obs-noise", o->eval.perturb.obs_noise,
+                  "Gaussian noise of this std on every observation entry (its own units)")
+      ->check(CLI::Range(0.0, 100.0));
+  cmd->add_option("--act-noise", o->eval.perturb.act_noise,
+                  "Gaussian noise of this std on every action entry (actions are in [-1, 1])")
+      ->check(CLI::Range(0.0, 100.0));
+  cmd->add_flag("--restore", o->eval.perturb.restore,
+                "save and restore the simulator's state at a random step");
 }
 
 // perch eval: what it writes besides its figures (filmstrip, recording, JSON).

@@ -348,6 +348,13 @@ void HumanoidChairEnv::UpdatePush() {
   ++pushes_;
 }
 
+void HumanoidChairEnv::StartPush(const Eigen::Vector3d& force_n, int steps) {
+  world_->SetRootForce(force_n);
+  // UpdatePush counts the step about to run down first, so the force lasts `steps` steps.
+  push_steps_left_ = std::max(1, steps) + 1;
+  ++pushes_;
+}
+
 StepResult HumanoidChairEnv::Step(const float* action, float* obs) {
   UpdatePush();
   const int n = model_.num_joints();

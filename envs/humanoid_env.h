@@ -125,6 +125,9 @@ class HumanoidChairEnv : public Env {
   // The random push (env.push) on the pelvis now [N], world frame; zero between pushes.
   const Eigen::Vector3d& push_force() const { return world_->root_force(); }
   int pushes() const { return pushes_; }  // pushes started this episode
+  // A push of `force_n` [N] (world frame) on the pelvis for the next `steps` control steps
+  // (perch eval --push; env.push draws its own).
+  void StartPush(const Eigen::Vector3d& force_n, int steps);
   // Torques [N m] (observation order) last applied, for diagnostics.
   const std::array<double, HumanoidModel::kNumJoints>& last_torques() const { return tau_; }
   const PdController& pd() const { return *pd_; }

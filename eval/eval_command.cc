@@ -413,7 +413,14 @@ void RunEvalCommand(EvalCommand& o) {
     WriteRecording(o.record, r, o.force);
     std::cerr << "eval: recording of " << r.episodes_size() << " episodes -> " << o.record << "\n";
   };
+  const auto no_perturbation = [&](const std::string& task) {
+    if (o.eval.perturb.any()) {
+      throw ConfigError("--push, --obs-noise, --act-noise, --restore: not yet for --task " + task +
+                        " (the subtasks' evaluations take them)");
+    }
+  };
   if (o.cfg.task == "chain") {
+    no_perturbation("chain");
     RunChain(o, write_recording);
     return;
   }
@@ -424,6 +431,7 @@ void RunEvalCommand(EvalCommand& o) {
     throw ConfigError("--model: required (but for --task chain and --planner)");
   }
   const TaskEnvConfig config = ResolveConfig(o.cfg, o.model);
+  if (config.env.task == "sit_chair") no_perturbation("sit_chair");
   if (o.planner && config.env.task != "sit_chair") {
     throw ConfigError("--planner: only for the sit_chair task, the config's is \"" +
                       config.env.task + "\"");

@@ -98,8 +98,11 @@ EpisodeTotals RunEvalEpisodes(HumanoidChairEnv* env, PolicyRunner* policy, const
   EpisodeTotals t;
   PolicyDriver driver(env, policy, o, loop, observer, rec, &t);
   const EpisodeLimits limits{loop.max_steps, loop.stop_at_truncation};
+  // The perturbations' random moments fall inside the episode's length.
+  PerturbedEnv perturbed(env, o.perturb, std::min(loop.max_steps, env->spec().max_episode_steps));
+  Env* stepped = o.perturb.any() ? static_cast<Env*>(&perturbed) : env;
   for (int e = 0; e < o.episodes; ++e) {
-    const EpisodeEnd end = RunEpisode(env, e, o.seed, limits, &driver);
+    const EpisodeEnd end = RunEpisode(stepped, e, o.seed, limits, &driver);
     if (end.fell) {
       ++t.falls;
       t.fall_times.push_back(end.steps * dt);
@@ -108,8 +111,47 @@ EpisodeTotals RunEvalEpisodes(HumanoidChairEnv* env, PolicyRunner* policy, const
     const bool success = observer->End(*env, e, end.steps, end.fell);
     if (o.recorder != nullptr) o.recorder->End(success, end.fell);
     t.steps += end.steps;
+    t.outcomes.push_back(success);
   }
   return t;
+}
+
+namespace {
+
+// An episode's outcome alone (AddFlipRate's unperturbed run).
+class OutcomeObserver : public EpisodeObserver {
+ public:
+  explicit OutcomeObserver(int no_fall_steps) : no_fall_steps_(no_fall_steps) {}
+  void Begin(const HumanoidChairEnv&) override { success_ = false; }
+  void Observe(const HumanoidChairEnv&, const StepResult& r, int) override {
+    success_ = success_ || r.success;
+  }
+  bool End(const HumanoidChairEnv& env, int, int steps, bool fell) override {
+    if (env.spec().has_success) return success_;
+    return !fell || steps >= no_fall_steps_;
+  }
+
+ private:
+  int no_fall_steps_;
+  bool success_ = false;
+};
+
+}  // namespace
+
+void AddFlipRate(HumanoidChairEnv* env, PolicyRunner* policy, const EvalOptions& o,
+                 const EpisodeLoop& loop, const EpisodeTotals& perturbed, int no_fall_steps,
+                 Json* j) {
+  if (!o.perturb.any()) return;
+  EvalOptions plain = o;
+  plain.perturb = Perturbation();
+  plain.recorder = nullptr;
+  OutcomeObserver observer(no_fall_steps);
+  const EpisodeTotals t = RunEvalEpisodes(env, policy, plain, loop, &observer, nullptr);
+  int successes = 0;
+  for (bool s : t.outcomes) successes += s;
+  (*j)["perturbation"] = o.perturb.ToJson();
+  (*j)["unperturbed_success_rate"] = static_cast<double>(successes) / o.episodes;
+  (*j).update(FlipRate(t.outcomes, perturbed.outcomes));
 }
 
 namespace {
@@ -171,6 +213,7 @@ Json EvaluateEpisodes(const TaskEnvConfig& config, const proto::ModelWeights& we
          {"fall_times_s", t.fall_times},
          {"fall_episodes", t.fall_episodes}};
   metrics->AddSummary(&j);
+  AddFlipRate(env.get(), &policy, o, loop, t, 0, &j);
   return j;
 }
 

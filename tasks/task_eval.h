@@ -19,6 +19,7 @@
 #include "policy/policy.h"
 #include "tasks/episode_loop.h"
 #include "tasks/foot_sliding.h"
+#include "tasks/perturbation.h"
 #include "tasks/recording.h"
 #include "tasks/task_env.h"
 
@@ -31,6 +32,9 @@ struct EvalOptions {
   double no_fall_s = 10.0;  // walk: an episode counts as no-fall if it stays up this long [s]
   FootSlidingOptions foot_sliding;
   EpisodeRecorder* recorder = nullptr;  // perch eval --record (not owned)
+  // perch eval --push/--obs-noise/--act-noise/--restore: the figures are the perturbed episodes',
+  // and the same episodes also run unperturbed for the flip rate (AddFlipRate).
+  Perturbation perturb;
 };
 
 // Episode 0, for the filmstrip.
@@ -85,6 +89,7 @@ struct EpisodeTotals {
   double sum_return = 0.0;
   Json fall_times = Json::array();     // [s] per fallen episode
   Json fall_episodes = Json::array();  // index per fallen episode
+  std::vector<bool> outcomes;          // per episode: its success (the observer's End)
 };
 
 // The policy of `weights` on an env of `spec`: Gaussian, its shapes those of the env
@@ -97,6 +102,14 @@ PolicyRunner MakeEvalPolicy(const proto::ModelWeights& weights, const EnvSpec& s
 EpisodeTotals RunEvalEpisodes(HumanoidChairEnv* env, PolicyRunner* policy, const EvalOptions& o,
                               const EpisodeLoop& loop, EpisodeObserver* observer,
                               EvalRecording* rec);
+
+// With o.perturb: runs the episodes of `perturbed` again without the perturbations and adds to *j
+// "perturbation", "unperturbed_success_rate" and FlipRate's keys. An episode's outcome is the
+// task's success (StepResult::success) or, for a task without one, staying up for
+// `no_fall_steps`.
+void AddFlipRate(HumanoidChairEnv* env, PolicyRunner* policy, const EvalOptions& o,
+                 const EpisodeLoop& loop, const EpisodeTotals& perturbed, int no_fall_steps,
+                 Json* j);
 
 // Runs the episodes with `metrics` and returns the common JSON (task, episodes, success_rate,
 // success_ci95, fall_rate, mean_imitation_reward, mean_return, ...) plus the task's.

@@ -174,6 +174,7 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
          {"fall_times_s", t.fall_times},
          {"fall_episodes", t.fall_episodes}};
   observer.AddSummary(t, n, &j);
+  AddFlipRate(env.get(), &policy, o, loop, t, no_fall_steps, &j);
   return j;
 }
 
