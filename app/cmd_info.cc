@@ -52,11 +52,11 @@ void RegisterInfoCommands(CLI::App& root, CLI::App& /*bench*/) {
   cc->add_option("--set", c->sets, "override a config field: section.field=VALUE (repeatable)");
   cc->add_flag("--resolved", c->resolved,
                "validate and fill in every default (as a run records it)");
-  cc->add_option(
-      "--fields", c->fields,
-      "print a section's fields instead (env, ppo, cluster, policy, a task's section such as walk "
-      "or sit_chair, or all): name, default, "
-      "range, doc");
+  cc->add_option("--fields", c->fields,
+                 "print a section's fields instead (env, ppo, cluster, policy, mock_env, a task's "
+                 "section such as walk "
+                 "or sit_chair, or all): name, default, "
+                 "range, doc");
   cc->add_flag("--json", c->json, "--fields: as JSON");
   cc->callback([c] {
     if (!c->fields.empty()) {

@@ -142,7 +142,8 @@ Json ConfigFieldTables() {
          {"ppo", PpoConfigFields().Describe()},
          {"cluster", ClusterConfigFields().Describe()},
          // The defaults of a subtask's policy; a meta's starts from PolicyConfig::Meta().
-         {"policy", PolicyConfigFields().Describe()}};
+         {"policy", PolicyConfigFields().Describe()},
+         {"mock_env", MockEnvConfigFields().Describe()}};
   // Each task's own section (env.<task> in a config).
   for (const std::string& name : TaskNames()) {
     const TaskDef& d = GetTask(name, "--fields");
@@ -176,7 +177,7 @@ std::string ConfigFieldsText(const std::string& section, bool json) {
   } else if (all.contains(section)) {
     pick[section] = all[section];
   } else {
-    std::string known = "env, ppo, cluster, policy";
+    std::string known = "env, ppo, cluster, policy, mock_env";
     for (const std::string& name : TaskNames()) {
       if (all.contains(name)) known += ", " + name;
     }

@@ -5,32 +5,28 @@
 
 namespace perch {
 
-Json ToJson(const MockEnvConfig& c) {
-  return Json{{"act_dim", c.act_dim},
-              {"noise_dims", c.noise_dims},
-              {"episode_steps", c.episode_steps},
-              {"fail_distance", c.fail_distance},
-              {"reward_scale", c.reward_scale},
-              {"work_iterations", c.work_iterations}};
+const FieldTable<MockEnvConfig>& MockEnvConfigFields() {
+  static const FieldTable<MockEnvConfig> t =
+      FieldTable<MockEnvConfig>()
+          .Add("act_dim", &MockEnvConfig::act_dim, "action size (the goal's too)",
+               Satisfies<int>([](const int& v) { return v >= 1; }, "must be >= 1"))
+          .Add("noise_dims", &MockEnvConfig::noise_dims, "observation entries of pure noise",
+               Satisfies<int>([](const int& v) { return v >= 0; }, "must be >= 0"))
+          .Add("episode_steps", &MockEnvConfig::episode_steps, "time limit [steps]",
+               Satisfies<int>([](const int& v) { return v >= 1; }, "must be >= 1"))
+          .Add("fail_distance", &MockEnvConfig::fail_distance,
+               "terminate when the action is this far from the goal")
+          .Add("reward_scale", &MockEnvConfig::reward_scale, "reward multiplier")
+          .Add("work_iterations", &MockEnvConfig::work_iterations,
+               "busy work per step (a stand-in for physics cost in transport benchmarks)",
+               Satisfies<int>([](const int& v) { return v >= 0; }, "must be >= 0"));
+  return t;
 }
 
+Json ToJson(const MockEnvConfig& c) { return MockEnvConfigFields().Write(c); }
+
 MockEnvConfig MockEnvConfigFromJson(const Json& j, const std::string& ctx) {
-  CheckKnownKeys(j,
-                 {"act_dim", "noise_dims", "episode_steps", "fail_distance", "reward_scale",
-                  "work_iterations"},
-                 ctx);
-  MockEnvConfig c;
-  GetOptional(j, "act_dim", c.act_dim, ctx);
-  GetOptional(j, "noise_dims", c.noise_dims, ctx);
-  GetOptional(j, "episode_steps", c.episode_steps, ctx);
-  GetOptional(j, "fail_distance", c.fail_distance, ctx);
-  GetOptional(j, "reward_scale", c.reward_scale, ctx);
-  GetOptional(j, "work_iterations", c.work_iterations, ctx);
-  if (c.act_dim < 1) throw ConfigError(ctx + ".act_dim: must be >= 1");
-  if (c.noise_dims < 0) throw ConfigError(ctx + ".noise_dims: must be >= 0");
-  if (c.episode_steps < 1) throw ConfigError(ctx + ".episode_steps: must be >= 1");
-  if (c.work_iterations < 0) throw ConfigError(ctx + ".work_iterations: must be >= 0");
-  return c;
+  return MockEnvConfigFields().Read(j, ctx);
 }
 
 MockEnv::MockEnv(const MockEnvConfig& config) : config_(config), goal_(config.act_dim) {

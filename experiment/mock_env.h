@@ -10,6 +10,7 @@
 #include <string>
 
 #include "common/env.h"
+#include "common/field_table.h"
 #include "common/json_util.h"
 #include "common/rng.h"
 
@@ -23,6 +24,8 @@ struct MockEnvConfig {
   float reward_scale = 1.0f;
   int work_iterations = 0;  // busy-loop per step, to emulate an expensive env in benchmarks
 };
+// The mock_env section's fields, each written once (common/field_table.h).
+const FieldTable<MockEnvConfig>& MockEnvConfigFields();
 Json ToJson(const MockEnvConfig& c);
 MockEnvConfig MockEnvConfigFromJson(const Json& j, const std::string& ctx);
 
