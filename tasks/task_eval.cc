@@ -99,7 +99,8 @@ EpisodeTotals RunEvalEpisodes(HumanoidChairEnv* env, PolicyRunner* policy, const
   PolicyDriver driver(env, policy, o, loop, observer, rec, &t);
   const EpisodeLimits limits{loop.max_steps, loop.stop_at_truncation};
   // The perturbations' random moments fall inside the episode's length.
-  PerturbedEnv perturbed(env, o.perturb, std::min(loop.max_steps, env->spec().max_episode_steps));
+  const int length = std::min(loop.max_steps, env->spec().max_episode_steps);
+  PerturbedEnv perturbed(env, o.perturb, loop.judged_steps > 0 ? loop.judged_steps : length);
   Env* stepped = o.perturb.any() ? static_cast<Env*>(&perturbed) : env;
   for (int e = 0; e < o.episodes; ++e) {
     const EpisodeEnd end = RunEpisode(stepped, e, o.seed, limits, &driver);

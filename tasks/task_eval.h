@@ -81,6 +81,9 @@ struct EpisodeLoop {
   int max_steps = 0;                // steps per episode at most
   bool stop_at_truncation = false;  // also end an episode at the task's time limit
   bool record_targets = false;      // the recording also keeps episode 0's distinct walk targets
+  // The steps an episode's outcome is judged over, where perturbations fall (0: the episode's
+  // length, max_steps or the task's time limit; walk: its no-fall window).
+  int judged_steps = 0;
 };
 struct EpisodeTotals {
   int invalid = 0;    // steps the env flagged invalid

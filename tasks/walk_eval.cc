@@ -154,6 +154,7 @@ Json EvaluateWalk(const TaskEnvConfig& config_in, const proto::ModelWeights& wei
   loop.max_steps = std::numeric_limits<int>::max();  // to the task's time limit
   loop.stop_at_truncation = true;
   loop.record_targets = target_mode;
+  loop.judged_steps = no_fall_steps;
   WalkObserver observer(*env, o, no_fall_steps, target_mode);
   const EpisodeTotals t = RunEvalEpisodes(env.get(), &policy, o, loop, &observer, rec);
   const double n = o.episodes;

@@ -112,3 +112,30 @@ TEST(Perturbation, TheUnperturbedRunIsThePlainEvaluation) {
 
 }  // namespace
 }  // namespace perch
+
+namespace perch {
+namespace {
+
+// The walk's outcome is staying up for the no-fall window, and its perturbations fall inside it:
+// the unperturbed run is the plain evaluation, and a hard push flips some episodes.
+TEST(Perturbation, WalkPushesLandInsideTheNoFallWindow) {
+  const std::string dir = std::string(PERCH_SOURCE_DIR) + "/models/";
+  const proto::ModelWeights w =
+      LoadModelFile(dir + "walk_stage2_fallrestart/checkpoints/ckpt-0000013900.bin");
+  TaskEnvConfig c =
+      TaskEnvConfig::FromJson(LoadJsonFile(dir + "walk_stage2/config.json")["env"], "walk_stage2");
+  EvalOptions o;
+  o.episodes = 6;
+  o.seed = 0;
+  o.no_fall_s = 2.0;  // shorter than the task's time limit
+  const TaskDef& def = GetTask("walk", "t");
+  const Json plain = def.evaluate(c, w, o, nullptr);
+  o.perturb.push_n = 400.0;
+  o.perturb.push_s = 0.2;
+  const Json pushed = def.evaluate(c, w, o, nullptr);
+  EXPECT_EQ(pushed["unperturbed_success_rate"], plain["no_fall_rate"]);
+  EXPECT_GT(pushed["flips"].get<int>(), 0);
+}
+
+}  // namespace
+}  // namespace perch
