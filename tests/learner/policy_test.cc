@@ -373,7 +373,8 @@ TEST(AppendZeroInputs, ActsAsTheSourceWhateverTheNewInputsHold) {
   dst.LoadWeights(wide);
   src.set_update_obs_stats(false);
   dst.set_update_obs_stats(false);
-  const int k = PolicyConfigFromShape(w.shape(), "w").act_dim;
+  // A meta's action: the switch class, then act_dim continuous values.
+  const int k = 1 + PolicyConfigFromShape(w.shape(), "w").act_dim;
   for (int trial = 0; trial < 5; ++trial) {
     std::vector<float> x(62), a(k), b(k);
     for (float& v : x) v = static_cast<float>(rng.Normal() * 2.0);
