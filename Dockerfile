@@ -14,7 +14,7 @@ RUN cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DPERCH_MARCH="$PERCH_MARCH" 
 
 FROM debian:12
 RUN apt-get update -qq && apt-get install -y -qq --no-install-recommends \
-      libbullet3.24 libzmq5 libprotobuf32 libspdlog1.10 libfmt9 libpng16-16 libssl3 zlib1g libcpp-httplib0.11 \
+      libbullet3.24 libbullet-extras3.24 libtinyobjloader2rc10 libzmq5 libprotobuf32 libspdlog1.10 libfmt9 libpng16-16 libssl3 zlib1g libcpp-httplib0.11 \
       libprometheus-cpp-pull1.0 libprometheus-cpp-core1.0 libcivetweb1 \
     && rm -rf /var/lib/apt/lists/*
 # The install tree: /usr/local/bin/perch finds its data in /usr/local/share/perch by itself

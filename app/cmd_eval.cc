@@ -52,7 +52,8 @@ void AddEvalEpisodeFlags(CLI::App* cmd, EvalCommand* o) {
                   "default: the config saved with the model, else the task's defaults");
   cmd->add_option("--chair", o->cfg.chair,
                   "chair override: a preset in data/chairs/ (authors, armchair, ...), a chair "
-                  "JSON file, or all (every preset, one result each)");
+                  "JSON file (boxes or mesh), all (every preset, one result each) or a "
+                  "directory (every chair file in it, one result each)");
   cmd->add_option("--start", o->cfg.start,
                   "episode start override: fixed (the config's initial pose / the clip's first "
                   "frame), reference (a random phase of the reference motion) or end-poses "

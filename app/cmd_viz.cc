@@ -25,8 +25,10 @@ void RegisterVizCommands(CLI::App& root, CLI::App& bench) {
       ->required();
   cmd->add_option("--out", opts->out, "output PNG path")->required();
   cmd->add_option("--frames", opts->frames, "number of frames drawn")->check(CLI::Range(1, 64));
-  cmd->add_option("--panel-px", opts->panel_px, "panel size in pixels")->check(CLI::Range(64, 1024));
-  cmd->add_option("--chair", opts->chair, "chair preset (data/chairs/NAME.json) to draw");
+  cmd->add_option("--panel-px", opts->panel_px, "panel size in pixels")
+      ->check(CLI::Range(64, 1024));
+  cmd->add_option("--chair", opts->chair,
+                  "chair to draw: a preset (data/chairs/NAME.json) or a chair file");
   cmd->add_option("--chair-x", opts->chair_x, "chair position x [m]");
   cmd->add_option("--chair-y", opts->chair_y, "chair position y [m]");
   cmd->add_option("--chair-yaw-deg", opts->chair_yaw_deg, "chair yaw [deg]");
@@ -47,7 +49,8 @@ void RegisterVizCommands(CLI::App& root, CLI::App& bench) {
       all.push_back(f);
     }
     std::unique_ptr<Chair> chair;
-    if (!opts->chair.empty()) chair = std::make_unique<Chair>(Chair::Load(Chair::PresetPath(opts->chair)));
+    if (!opts->chair.empty())
+      chair = std::make_unique<Chair>(Chair::Load(Chair::ResolvePath(opts->chair)));
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
     pose.translate(Eigen::Vector3d(opts->chair_x, opts->chair_y, 0));
     pose.rotate(Eigen::AngleAxisd(opts->chair_yaw_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ()));

@@ -20,5 +20,6 @@ void RegisterMetaCommands(CLI::App& root, CLI::App& bench);     // app/cmd_meta.
 void RegisterFuzzCommand(CLI::App& root);                       // app/cmd_fuzz.cc
 void RegisterRecipeCommands(CLI::App& root, CLI::App& bench);   // app/cmd_recipe.cc
 void RegisterBenchCommands(CLI::App& root, CLI::App& bench);    // app/cmd_bench.cc
+void RegisterChairCommands(CLI::App& root, CLI::App& bench);    // app/cmd_chair.cc
 
 }  // namespace perch

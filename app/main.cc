@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
   perch::RegisterClusterCommands(app, *bench);
   perch::RegisterBenchCommands(app, *bench);
   perch::RegisterVizCommands(app, *bench);
+  perch::RegisterChairCommands(app, *bench);
   perch::RegisterEvalCommands(app, *bench);
   perch::RegisterProfileCommands(app, *bench);
   perch::RegisterViewCommands(app, *bench);

@@ -73,10 +73,32 @@ std::vector<ChairBox> BuildParametric(const Json& p, const std::string& ctx) {
   return boxes;
 }
 
+// Inertia of a solid filling [lo, hi] unless the file gives com / inertia.
+void SetMassProperties(const Json& j, const std::string& ctx, const Eigen::Vector3d& lo,
+                       const Eigen::Vector3d& hi, Chair* c) {
+  const Eigen::Vector3d e = hi - lo;
+  c->inertia = c->mass / 12.0 *
+               Eigen::Vector3d(e.y() * e.y() + e.z() * e.z(), e.x() * e.x() + e.z() * e.z(),
+                               e.x() * e.x() + e.y() * e.y());
+  if (j.contains("com")) c->com = ReadVec3(j, "com", ctx);
+  if (j.contains("inertia")) {
+    c->inertia = ReadVec3(j, "inertia", ctx);
+    if (c->inertia.minCoeff() <= 0.0) throw ConfigError(ctx + ".inertia: must be > 0");
+  }
+}
+
 }  // namespace
 
 std::string Chair::PresetPath(const std::string& preset) {
   return ResolveProjectPath("data/chairs/" + preset + ".json");
+}
+
+std::string Chair::ResolvePath(const std::string& preset_or_path) {
+  const std::string& p = preset_or_path;
+  if (p.find('/') != std::string::npos || (p.size() > 5 && p.substr(p.size() - 5) == ".json")) {
+    return p;
+  }
+  return PresetPath(p);
 }
 
 std::vector<std::string> Chair::PresetNames() {
@@ -89,17 +111,56 @@ std::vector<std::string> Chair::PresetNames() {
   return names;
 }
 
+// A chair from the mesh keys of `j`; `c` holds what FromJson read already.
+static Chair FromMeshJson(const Json& j, const std::string& ctx, Chair c) {
+  if (j.contains("seat_target")) {
+    throw ConfigError(ctx + ".seat_target: a mesh chair takes 'seat' (file units and axes)");
+  }
+  auto mesh = std::make_shared<MeshChair>(LoadMeshChair(j, ctx, c.dynamic));
+  const Eigen::AlignedBox3d box = mesh->visual.Bounds();
+  c.com = box.center();  // the bounding box's centre: a mesh need not be closed to have a volume
+  SetMassProperties(j, ctx, box.min(), box.max(), &c);
+  c.seat_target = mesh->seat_target;
+  c.mesh = std::move(mesh);
+  return c;
+}
+
 Chair Chair::Load(const std::string& path) { return FromJson(LoadJsonFile(path), path); }
+
+std::optional<double> Chair::backrest_front_x() const {
+  if (mesh) return mesh->backrest_front_x;
+  std::optional<double> x;
+  for (const ChairBox& b : boxes) {
+    if (b.role == "backrest" && (!x || b.max.x() > *x)) x = b.max.x();
+  }
+  return x;
+}
 
 Chair Chair::FromJson(const Json& j, const std::string& ctx) {
   CheckKnownKeys(j,
-                 {"_comment", "name", "boxes", "parametric", "mass", "dynamic", "com", "inertia",
-                  "seat_target"},
+                 {"_comment", "name", "source", "boxes", "parametric", "mesh", "scale", "up_axis",
+                  "collision_mesh", "seat", "facing_deg", "mass", "dynamic", "static", "com",
+                  "inertia", "seat_target"},
                  ctx);
   Chair c;
   GetRequired(j, "name", c.name, ctx);
-  if (j.contains("boxes") == j.contains("parametric")) {
-    throw ConfigError(ctx + ": give exactly one of 'boxes' or 'parametric'");
+  GetOptional(j, "source", c.source, ctx);
+  const int kinds = j.contains("boxes") + j.contains("parametric") + j.contains("mesh");
+  if (kinds != 1) throw ConfigError(ctx + ": give exactly one of 'boxes', 'parametric' or 'mesh'");
+  if (j.contains("dynamic") && j.contains("static")) {
+    throw ConfigError(ctx + ": give one of 'dynamic' or 'static', not both");
+  }
+  GetOptional(j, "dynamic", c.dynamic, ctx);
+  if (j.contains("static")) {
+    bool is_static = false;
+    GetRequired(j, "static", is_static, ctx);
+    c.dynamic = !is_static;
+  }
+  GetOptional(j, "mass", c.mass, ctx);
+  if (!(c.mass > 0.0)) throw ConfigError(ctx + ".mass: must be > 0");
+  if (j.contains("mesh")) return FromMeshJson(j, ctx, std::move(c));
+  for (const char* key : {"scale", "up_axis", "collision_mesh", "seat", "facing_deg"}) {
+    if (j.contains(key)) throw ConfigError(ctx + "." + key + ": only a 'mesh' chair takes it");
   }
   if (j.contains("boxes")) {
     const Json& jb = j["boxes"];
@@ -128,9 +189,6 @@ Chair Chair::FromJson(const Json& j, const std::string& ctx) {
     }
   }
   if (c.seat_box < 0) throw ConfigError(ctx + ".boxes: no box has role 'seat'");
-  GetOptional(j, "mass", c.mass, ctx);
-  if (!(c.mass > 0.0)) throw ConfigError(ctx + ".mass: must be > 0");
-  GetOptional(j, "dynamic", c.dynamic, ctx);
   // Defaults: com at the volume centroid, inertia of a solid of the boxes' bounding box.
   double vol = 0.0;
   Eigen::Vector3d moment = Eigen::Vector3d::Zero();
@@ -143,15 +201,7 @@ Chair Chair::FromJson(const Json& j, const std::string& ctx) {
     hi = hi.cwiseMax(b.max);
   }
   c.com = moment / vol;
-  const Eigen::Vector3d e = hi - lo;
-  c.inertia = c.mass / 12.0 *
-              Eigen::Vector3d(e.y() * e.y() + e.z() * e.z(), e.x() * e.x() + e.z() * e.z(),
-                              e.x() * e.x() + e.y() * e.y());
-  if (j.contains("com")) c.com = ReadVec3(j, "com", ctx);
-  if (j.contains("inertia")) {
-    c.inertia = ReadVec3(j, "inertia", ctx);
-    if (c.inertia.minCoeff() <= 0.0) throw ConfigError(ctx + ".inertia: must be > 0");
-  }
+  SetMassProperties(j, ctx, lo, hi, &c);
   const ChairBox& seat = c.boxes[c.seat_box];
   c.seat_target = Eigen::Vector3d(seat.center().x(), seat.center().y(), seat.max.z());
   if (j.contains("seat_target")) c.seat_target = ReadVec3(j, "seat_target", ctx);

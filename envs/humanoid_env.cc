@@ -132,8 +132,7 @@ HumanoidState SeatedPose(const HumanoidModel& model, const Chair& chair,
   const Eigen::Vector3d pelvis_pos = fk.body_world[pelvis].translation();
   double x = chair.seat_target.x() - pelvis_pos.x();
   // Keep the trunk in front of a backrest: rearmost point of torso, lwaist and pelvis.
-  for (const ChairBox& box : chair.boxes) {
-    if (box.role != "backrest") continue;
+  if (const std::optional<double> back = chair.backrest_front_x()) {
     double rear = 1e9;
     for (int b : {0, model.FindBody("lwaist"), pelvis}) {
       for (const Geom& g : model.body(b).geoms) {
@@ -142,7 +141,7 @@ HumanoidState SeatedPose(const HumanoidModel& model, const Chair& chair,
             std::min((fk.body_world[b] * g.from).x(), (fk.body_world[b] * g.to).x()) - g.radius);
       }
     }
-    x = std::max(x, box.max.x() + clearance - rear);
+    x = std::max(x, *back + clearance - rear);
   }
   s.root_pos = Eigen::Vector3d(x, chair.seat_target.y() - pelvis_pos.y(),
                                chair.seat_height() + clearance - low);

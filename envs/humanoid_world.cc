@@ -18,6 +18,7 @@ namespace {
 
 // Tags in btCollisionObject::userIndex, to classify contacts.
 enum ObjectKind { kFloor = 1, kChair = 2, kHumanoid = 3 };
+constexpr double kChairHullMargin = 0.001;  // [m] collision margin of a mesh chair's convex parts
 
 btVector3 Bt(const Eigen::Vector3d& v) { return btVector3(v.x(), v.y(), v.z()); }
 Eigen::Vector3d Ei(const btVector3& v) { return Eigen::Vector3d(v.x(), v.y(), v.z()); }
@@ -303,20 +304,75 @@ void World::AddFloor(Scene& sc) {
   sc.world.addRigidBody(floor);
 }
 
-void World::AddChair(Scene& sc, const ChairState* chair_state) {
-  // Chair: one rigid body with a compound of boxes, frame at its com.
-  if (!chair_) return;
-  auto* compound = new btCompoundShape();
-  sc.Keep(compound);
-  for (const ChairBox& b : chair_->boxes) {
-    auto* box = sc.Keep(new btBoxShape(Bt(b.half_extents())));
-    compound->addChildShape(btTransform(btQuaternion::getIdentity(), Bt(b.center() - chair_->com)),
-                            box);
+struct World::MeshShapes {
+  const MeshChair* source = nullptr;
+  Eigen::Vector3d com = Eigen::Vector3d::Zero();
+  std::unique_ptr<btTriangleMesh> tris;
+  std::unique_ptr<btBvhTriangleMeshShape> static_shape;
+  std::vector<std::unique_ptr<btConvexHullShape>> hulls;
+};
+
+const World::MeshShapes& World::ChairMeshShapes() {
+  // Building the triangle BVH costs more than a step, and SetState rebuilds the scene often.
+  const MeshChair* m = chair_->mesh.get();
+  if (mesh_shapes_ && mesh_shapes_->source == m && mesh_shapes_->com == chair_->com) {
+    return *mesh_shapes_;
   }
+  auto ms = std::make_unique<MeshShapes>();
+  ms->source = m;
+  ms->com = chair_->com;
+  ms->tris = std::make_unique<btTriangleMesh>();
+  const TriMesh& t = m->collision_static;
+  for (const auto& tri : t.triangles) {
+    ms->tris->addTriangle(Bt(t.vertices[tri[0]] - ms->com), Bt(t.vertices[tri[1]] - ms->com),
+                          Bt(t.vertices[tri[2]] - ms->com), /*removeDuplicateVertices=*/false);
+  }
+  ms->static_shape = std::make_unique<btBvhTriangleMeshShape>(ms->tris.get(), true);
+  for (const TriMesh& part : m->convex_parts) {
+    if (part.vertices.empty()) continue;
+    auto hull = std::make_unique<btConvexHullShape>();
+    for (const Eigen::Vector3d& v : part.vertices) hull->addPoint(Bt(v - ms->com), false);
+    // Bullet pads a hull by a 4 cm margin by default: a chair standing on the floor would start
+    // 4 cm inside it, and a seat would hold the pelvis 4 cm above its surface.
+    hull->setMargin(kChairHullMargin);
+    hull->recalcLocalAabb();
+    ms->hulls.push_back(std::move(hull));
+  }
+  mesh_shapes_ = std::move(ms);  // only SetState calls this, after the old scene is gone
+  return *mesh_shapes_;
+}
+
+void World::AddChair(Scene& sc, const ChairState* chair_state) {
+  // Chair: one rigid body with a compound of boxes or convex parts (or, static, a triangle mesh),
+  // frame at its com.
+  if (!chair_) return;
   const bool dynamic = chair_->dynamic && config_.chair_body != ChairBody::kStatic;
+  btCollisionShape* shape = nullptr;
+  if (chair_->mesh) {
+    const MeshShapes& ms = ChairMeshShapes();
+    if (dynamic) {
+      auto* compound = new btCompoundShape();
+      sc.Keep(compound);
+      for (const auto& hull : ms.hulls) {
+        compound->addChildShape(btTransform::getIdentity(), hull.get());
+      }
+      shape = compound;
+    } else {
+      shape = ms.static_shape.get();  // concave: Bullet allows it on a static body only
+    }
+  } else {
+    auto* compound = new btCompoundShape();
+    sc.Keep(compound);
+    for (const ChairBox& b : chair_->boxes) {
+      auto* box = sc.Keep(new btBoxShape(Bt(b.half_extents())));
+      compound->addChildShape(
+          btTransform(btQuaternion::getIdentity(), Bt(b.center() - chair_->com)), box);
+    }
+    shape = compound;
+  }
   const double mass = dynamic ? chair_->mass : 0.0;
   btVector3 inertia = dynamic ? Bt(chair_->inertia) : btVector3(0, 0, 0);
-  btRigidBody::btRigidBodyConstructionInfo ci(mass, nullptr, compound, inertia);
+  btRigidBody::btRigidBodyConstructionInfo ci(mass, nullptr, shape, inertia);
   ci.m_friction = config_.chair_friction;
   auto* rb = new btRigidBody(ci);
   Eigen::Isometry3d frame = placement_.Transform();

@@ -180,11 +180,13 @@ class World {
 
  private:
   struct Scene;
+  struct MeshShapes;  // a mesh chair's Bullet shapes, built once per chair and shared by scenes
   // SetState's steps, in order, on the new scene: the floor, the chair (at its placement, or
   // where chair_state says), the humanoid's multibody (links from the model), its pose and
   // velocities, its colliders and its joint limits.
   void AddFloor(Scene& sc);
   void AddChair(Scene& sc, const ChairState* chair_state);
+  const MeshShapes& ChairMeshShapes();
   void BuildHumanoid(Scene& sc);
   void PlaceHumanoid(Scene& sc, const HumanoidState& hs);
   void AddColliders(Scene& sc);
@@ -199,6 +201,7 @@ class World {
   const Chair* chair_;
   ChairPlacement placement_;
   PhysicsConfig config_;
+  std::unique_ptr<MeshShapes> mesh_shapes_;  // declared before scene_: outlives its bodies
   std::unique_ptr<Scene> scene_;
   std::array<double, HumanoidModel::kNumJoints> tau_{};
   Eigen::Vector3d root_force_ = Eigen::Vector3d::Zero();

@@ -279,21 +279,21 @@ void RunChain(EvalCommand& o, const RecordingWriter& write_recording) {
 }
 
 void RunSitChair(EvalCommand& o, const TaskEnvConfig& config) {
-  if (o.cfg.chair == "all" &&
-      (!o.filmstrip.empty() || !o.matrix_png.empty() || !o.records.empty())) {
-    throw ConfigError(
-        "--filmstrip / --matrix-png / --records: not with --chair all (name one chair)");
+  const auto chairs = ChairSet(o.cfg.chair);
+  if (!chairs.empty() && (!o.filmstrip.empty() || !o.matrix_png.empty() || !o.records.empty())) {
+    throw ConfigError("--filmstrip / --matrix-png / --records: not with --chair " + o.cfg.chair +
+                      " (name one chair)");
   }
-  if (o.cfg.chair == "all") {
-    // Every preset in data/chairs/, one row each (the many-chairs table).
+  if (!chairs.empty()) {
+    // Every preset (--chair all) or every chair file of a folder, one row each.
     Json table = Json::object();
-    for (const std::string& preset : Chair::PresetNames()) {
+    for (const auto& [name, chair] : chairs) {
       ConfigOverrides co = o.cfg;
-      co.chair = preset;
-      std::cerr << "eval: chair " << preset << "\n";
+      co.chair = chair;
+      std::cerr << "eval: chair " << name << "\n";
       Json r = EvaluateMetaOnChair(o, ResolveConfig(co, o.model));
       r.erase("sequences");
-      table[preset] = r;
+      table[name] = r;
     }
     Json all{{"task", "sit_chair"},
              {"model", o.planner ? Json("planner") : Json(ModelFile(o.model))},
@@ -331,18 +331,21 @@ void RunTaskEval(EvalCommand& o, const TaskEnvConfig& config,
             << "\n";
   const TaskDef& def = GetTask(config.env.task, "--task");
   if (!def.evaluate) throw ConfigError("--task " + def.name + ": has no evaluation");
-  if (o.cfg.chair == "all") {
-    // Every preset in data/chairs/, one row each (the many-chairs table).
+  const auto chairs = ChairSet(o.cfg.chair);
+  if (!chairs.empty()) {
+    // Every preset (--chair all) or every chair file of a folder, one row each.
     Json table = Json::object();
-    for (const std::string& preset : Chair::PresetNames()) {
+    for (const auto& [name, chair] : chairs) {
       ConfigOverrides co = o.cfg;
-      co.chair = preset;
+      co.chair = chair;
       const TaskEnvConfig cc = ResolveConfig(co, o.model);
-      std::cerr << "eval: chair " << preset << "\n";
+      std::cerr << "eval: chair " << name << "\n";
       Json r = def.evaluate(cc, weights, o.eval, nullptr);
       r.erase("fall_times_s");
       r.erase("fall_episodes");
-      table[preset] = r;
+      Json chair_json = LoadJsonFile(cc.env.ChairPath());
+      if (chair_json.contains("source")) r["chair_source"] = chair_json["source"];
+      table[name] = r;
     }
     Json result{{"model", model_file}, {"task", config.env.task}, {"per_chair", table}};
     if (o.json) {
@@ -392,7 +395,9 @@ void RunEvalCommand(EvalCommand& o) {
   // --record: checked before the (long) evaluation, written after it.
   std::unique_ptr<EpisodeRecorder> recorder;
   if (!o.record.empty()) {
-    if (o.cfg.chair == "all") throw ConfigError("--record: not with --chair all");
+    if (!ChairSet(o.cfg.chair).empty()) {
+      throw ConfigError("--record: not with --chair " + o.cfg.chair + " (name one chair)");
+    }
     if (!o.force && std::filesystem::exists(o.record)) {
       throw ConfigError("--record " + o.record + ": exists; not overwritten (--force)");
     }

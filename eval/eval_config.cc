@@ -6,6 +6,7 @@
 #include <set>
 
 #include "common/paths.h"
+#include "envs/chair.h"
 #include "envs/humanoid_model.h"
 #include "tasks/model_source.h"
 #include "tasks/registry.h"
@@ -130,11 +131,30 @@ TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_p
     sec["reward_variant"] = o.variant;
   }
   if (!o.action_mode.empty()) j["action_mode"] = o.action_mode;
-  if (!o.chair.empty() && o.chair != "all") j["chair"] = o.chair;
+  if (!o.chair.empty() && ChairSet(o.chair).empty()) j["chair"] = o.chair;
   // Evaluation measures the chair asked for, not a training distribution of chairs.
   if (j.contains("chair_random")) j["chair_random"]["prob"] = 0.0;
   if (task == "stand") j.erase("walk");
   return TaskEnvConfig::FromJson(j, ctx);
+}
+
+std::vector<std::pair<std::string, std::string>> ChairSet(const std::string& chair) {
+  std::vector<std::pair<std::string, std::string>> set;
+  if (chair == "all") {
+    for (const std::string& preset : Chair::PresetNames()) set.push_back({preset, preset});
+    return set;
+  }
+  std::error_code ec;
+  if (chair.empty() || !std::filesystem::is_directory(chair, ec)) return set;
+  for (const auto& e : std::filesystem::directory_iterator(chair)) {
+    if (e.path().extension() == ".json") {
+      set.push_back({e.path().stem().string(), std::filesystem::absolute(e.path()).string()});
+    }
+  }
+  std::sort(set.begin(), set.end());
+  if (set.empty())
+    throw ConfigError("--chair " + chair + ": a directory with no chair files (*.json)");
+  return set;
 }
 
 std::vector<std::string> EvalTaskNames() {

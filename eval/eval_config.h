@@ -4,6 +4,7 @@
 #pragma once
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "hierarchy/chain_plan.h"
@@ -35,6 +36,11 @@ PlannerConfig LookaheadFromFile(const std::string& path, const PlannerConfig& fl
 // Task config: --config's, else the model's saved one, else the task's defaults; then the
 // command-line overrides. Warns when --config's task section differs from the saved one.
 TaskEnvConfig ResolveConfig(const ConfigOverrides& o, const std::string& model_path);
+
+// A --chair naming several chairs: "all" (every preset in data/chairs/) or a directory (every
+// chair file *.json in it). Each is {row name, the --chair value of that one}, sorted by name;
+// empty when --chair names one chair.
+std::vector<std::pair<std::string, std::string>> ChairSet(const std::string& chair);
 
 // The registered tasks and "chain" (the scripted walk -> turn -> sit chain).
 std::vector<std::string> EvalTaskNames();

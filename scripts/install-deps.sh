@@ -4,7 +4,7 @@ set -euo pipefail
 
 PACKAGES=(
   build-essential cmake pkg-config git
-  libbullet-dev
+  libbullet-dev libbullet-extras-dev libtinyobjloader-dev
   libzmq3-dev cppzmq-dev
   prometheus-cpp-dev
   libprotobuf-dev protobuf-compiler

@@ -52,6 +52,13 @@ void FillChair(const Chair& c, proto::RecChair* rc) {
     Put3(rb->mutable_max(), b.max);
   }
   Put3(rc->mutable_seat_target(), c.seat_target);
+  if (c.mesh) {
+    for (const Eigen::Vector3d& v : c.mesh->visual.vertices) Put3(rc->mutable_mesh_vertices(), v);
+    for (const auto& t : c.mesh->visual.triangles) {
+      for (int i : t) rc->add_mesh_triangles(static_cast<uint32_t>(i));
+    }
+    rc->set_source(c.source);
+  }
 }
 
 }  // namespace

@@ -23,12 +23,58 @@ const Rgb kTarget{30, 160, 60};
 // A drawable item with a depth for painter's ordering (larger depth is drawn first).
 struct Item {
   double depth;
-  bool is_box;
+  bool is_box;           // a box or a mesh triangle: the convex hull of `corners`
   Eigen::Vector3d a, b;  // capsule ends (world)
   double radius;
-  std::vector<Eigen::Vector3d> corners;  // box corners (world)
+  std::vector<Eigen::Vector3d> corners;  // box corners or triangle vertices (world)
   Rgb color;
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();  // a triangle's, for shading; zero: flat
 };
+
+// A mesh triangle is shaded by how squarely it faces the viewer, so its shape reads.
+Rgb Shade(const Item& it, bool top) {
+  if (it.normal.isZero()) return it.color;
+  const double f = 0.55 + 0.45 * std::abs(top ? it.normal.z() : it.normal.y());
+  return Rgb{static_cast<uint8_t>(it.color.r * f), static_cast<uint8_t>(it.color.g * f),
+             static_cast<uint8_t>(it.color.b * f)};
+}
+
+// The chair's boxes, or its mesh's triangles (those of the seat surface in the seat colour).
+std::vector<Item> ChairItems(const Chair& chair, const Eigen::Isometry3d& pose) {
+  std::vector<Item> items;
+  for (size_t i = 0; i < chair.boxes.size(); ++i) {
+    const ChairBox& b = chair.boxes[i];
+    Item it{};
+    it.is_box = true;
+    for (int c = 0; c < 8; ++c) {
+      const Eigen::Vector3d local((c & 1) ? b.max.x() : b.min.x(), (c & 2) ? b.max.y() : b.min.y(),
+                                  (c & 4) ? b.max.z() : b.min.z());
+      it.corners.push_back(pose * local);
+    }
+    it.color = static_cast<int>(i) == chair.seat_box ? kSeat : kChair;
+    items.push_back(it);
+  }
+  if (chair.mesh) {
+    const TriMesh& m = chair.mesh->visual;
+    constexpr double kSeatBand = 0.03;  // [m] upward triangles this near the seat height
+    for (const auto& t : m.triangles) {
+      Item it{};
+      it.is_box = true;
+      for (int k : t) it.corners.push_back(m.vertices[k]);
+      const Eigen::Vector3d n =
+          (it.corners[1] - it.corners[0]).cross(it.corners[2] - it.corners[0]);
+      if (n.norm() <= 0.0) continue;
+      it.normal = n.normalized();
+      const double z = (it.corners[0].z() + it.corners[1].z() + it.corners[2].z()) / 3.0;
+      it.color =
+          it.normal.z() > 0.9 && std::abs(z - chair.seat_height()) < kSeatBand ? kSeat : kChair;
+      for (auto& p : it.corners) p = pose * p;
+      it.normal = pose.linear() * it.normal;
+      items.push_back(it);
+    }
+  }
+  return items;
+}
 
 Rgb BodyColor(const std::string& name) {
   if (name.rfind("right_", 0) == 0) return kRight;
@@ -73,7 +119,7 @@ void DrawPanel(Canvas& panel, const View& view, const std::vector<Item>& items_i
     if (it.is_box) {
       std::vector<Eigen::Vector2d> pts;
       for (const auto& c : it.corners) pts.push_back(view.Map(c));
-      panel.FillConvexHull(pts, it.color);
+      panel.FillConvexHull(pts, Shade(it, view.top));
     } else {
       panel.FillCapsule(view.Map(it.a), view.Map(it.b), std::max(1.0, it.radius * view.scale),
                         it.color);
@@ -109,21 +155,7 @@ Canvas RenderFilmstrip(const HumanoidModel& model, const Chair* chair,
   const int px = options.panel_px;
   // Chair items are the same in every frame.
   std::vector<Item> chair_items;
-  if (chair) {
-    for (size_t i = 0; i < chair->boxes.size(); ++i) {
-      const ChairBox& b = chair->boxes[i];
-      Item it{};
-      it.is_box = true;
-      for (int c = 0; c < 8; ++c) {
-        const Eigen::Vector3d local((c & 1) ? b.max.x() : b.min.x(),
-                                    (c & 2) ? b.max.y() : b.min.y(),
-                                    (c & 4) ? b.max.z() : b.min.z());
-        it.corners.push_back(chair_pose * local);
-      }
-      it.color = static_cast<int>(i) == chair->seat_box ? kSeat : kChair;
-      chair_items.push_back(it);
-    }
-  }
+  if (chair) chair_items = ChairItems(*chair, chair_pose);
   // One fixed window over all roots and the chair, unless following.
   Eigen::Vector2d lo(1e9, 1e9), hi(-1e9, -1e9);
   for (const auto& f : frames) {
@@ -156,7 +188,7 @@ Canvas RenderFilmstrip(const HumanoidModel& model, const Chair* chair,
     std::vector<Item> side = chair_items, top = chair_items;
     for (auto& it : side) {
       double y = 0;
-      for (const auto& c : it.corners) y += c.y() / 8;
+      for (const auto& c : it.corners) y += c.y() / static_cast<double>(it.corners.size());
       it.depth = y;
     }
     for (auto& it : top) {
@@ -201,6 +233,55 @@ Canvas RenderFilmstrip(const HumanoidModel& model, const Chair* chair,
   }
   strip.FillRect(0, px, strip.width() - 1, px, kSeparator);
   return strip;
+}
+
+Canvas RenderChairViews(const Chair& chair, int panel_px) {
+  const std::vector<Item> items = ChairItems(chair, Eigen::Isometry3d::Identity());
+  Eigen::AlignedBox3d box;
+  for (const Item& it : items) {
+    for (const auto& c : it.corners) box.extend(c);
+  }
+  box.extend(chair.seat_target);
+  const double extent = std::max(1.0, box.sizes().maxCoeff() + 0.5);
+  const double scale = panel_px / extent;
+  const Eigen::Vector3d mid = box.center();
+  const View tv{true, mid.x(), mid.y(), scale, panel_px};
+  const View sv{false, mid.x(), mid.z(), scale, panel_px};
+  std::vector<Item> top = items, side = items;
+  for (auto& it : side) {
+    double y = 0;
+    for (const auto& c : it.corners) y += c.y() / static_cast<double>(it.corners.size());
+    it.depth = y;
+  }
+  for (auto& it : top) {
+    double z = -1e9;
+    for (const auto& c : it.corners) z = std::max(z, c.z());
+    it.depth = -z;
+  }
+  Canvas top_panel(panel_px, panel_px, kBackground), side_panel(panel_px, panel_px, kBackground);
+  DrawPanel(top_panel, tv, top, {});
+  DrawPanel(side_panel, sv, side, {});
+  // The seat target (a green cross) and the facing (+x of the chair frame, a 0.3 m arrow).
+  const Eigen::Vector3d s = chair.seat_target;
+  const Eigen::Vector3d tip = s + Eigen::Vector3d(0.3, 0, 0);
+  for (auto [panel, view] : {std::pair<Canvas*, const View*>{&top_panel, &tv},
+                             std::pair<Canvas*, const View*>{&side_panel, &sv}}) {
+    const Eigen::Vector2d p = view->Map(s), q = view->Map(tip);
+    panel->FillCapsule(p + Eigen::Vector2d(-6, -6), p + Eigen::Vector2d(6, 6), 1.5, kTarget);
+    panel->FillCapsule(p + Eigen::Vector2d(-6, 6), p + Eigen::Vector2d(6, -6), 1.5, kTarget);
+    panel->FillCapsule(p, q, 1.5, kTarget);
+    const Eigen::Vector2d d = (q - p).normalized(), n(-d.y(), d.x());
+    panel->FillCapsule(q, q - 8 * d + 5 * n, 1.5, kTarget);
+    panel->FillCapsule(q, q - 8 * d - 5 * n, 1.5, kTarget);
+  }
+  constexpr int kCaption = 16;
+  Canvas out(2 * panel_px + 1, panel_px + kCaption, kBackground);
+  out.Blit(top_panel, 0, 0);
+  out.Blit(side_panel, panel_px + 1, 0);
+  out.FillRect(panel_px, 0, panel_px, panel_px + kCaption - 1, kSeparator);
+  out.DrawText(3, panel_px + 4, "top", Rgb{20, 20, 20});
+  out.DrawText(panel_px + 4, panel_px + 4, "side", Rgb{20, 20, 20});
+  return out;
 }
 
 }  // namespace perch

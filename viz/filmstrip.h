@@ -1,6 +1,6 @@
 // Draws a few frames of an episode as a filmstrip PNG, side view (x right, z up) above top view
 // (x right, y up), a time stamp (and the frame's label) under each, with the humanoid's capsules,
-// the chair's boxes and walk targets, so a person can
+// the chair (boxes or mesh) and walk targets, so a person can
 // see a gait or a sit without a 3D viewer. Pure C++ (FK from the model), no Bullet.
 #pragma once
 
@@ -28,6 +28,10 @@ struct FilmstripOptions {
 Canvas RenderFilmstrip(const HumanoidModel& model, const Chair* chair,
                        const Eigen::Isometry3d& chair_pose, const std::vector<PoseFrame>& frames,
                        const FilmstripOptions& options = {});
+
+// A chair alone in its frame: top view (x right, y up) beside side view (x right, z up), with the
+// seat target (a cross) and the facing (+x, an arrow); `perch chair inspect --png`.
+Canvas RenderChairViews(const Chair& chair, int panel_px = 320);
 
 // Picks `count` frames evenly spaced over `all` (first and last included).
 std::vector<PoseFrame> PickFrames(const std::vector<PoseFrame>& all, int count);

@@ -8,6 +8,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include "common/paths.h"
+#include "envs/chair.h"
 #include "learner/ppo.h"
 #include "motion/bvh.h"
 #include "motion/bvh_export.h"
@@ -133,6 +135,35 @@ TEST(Recording, ARecordedEpisodeRoundTripsThroughBvh) {
     for (int j = 0; j < 21; ++j) EXPECT_NEAR(q[j], ep.frames(f).q(j), 1e-4) << j << " " << f;
   }
   EXPECT_THROW(RecordedMotion(rec.recording(), 5, model, "rec"), ConfigError);
+}
+
+// A mesh chair's triangles travel in the recording, so it plays back without the mesh file.
+TEST(Recording, AMeshChairsTrianglesAreInTheRecording) {
+  if (SharedDir().empty()) GTEST_SKIP() << "../shared is absent";
+  const TaskEnvConfig c =
+      TaskEnvConfig::FromJson(Json{{"task", "sit"},
+                                   {"chair", "data/chairs/meshes/dining_scenic.json"},
+                                   {"sit", {{"eval_episode_s", 0.1}}}},
+                              "t");
+  EpisodeRecorder rec(1);
+  EvalOptions o;
+  o.episodes = 1;
+  o.seed = 7;
+  o.recorder = &rec;
+  GetTask("sit", "t").evaluate(c, Untrained(57, 3), o, nullptr);
+  ASSERT_EQ(rec.recording().episodes_size(), 1);
+  const proto::RecChair& rc = rec.recording().episodes(0).chair();
+  const Chair chair = Chair::Load(c.env.ChairPath());
+  EXPECT_TRUE(rc.boxes().empty());
+  ASSERT_EQ(rc.mesh_vertices_size(), 3 * static_cast<int>(chair.mesh->visual.vertices.size()));
+  ASSERT_EQ(rc.mesh_triangles_size(), 3 * static_cast<int>(chair.mesh->visual.triangles.size()));
+  for (int i = 0; i < rc.mesh_vertices_size(); ++i) {
+    EXPECT_NEAR(rc.mesh_vertices(i), chair.mesh->visual.vertices[i / 3][i % 3], 1e-6);
+  }
+  for (int i = 0; i < rc.mesh_triangles_size(); ++i) {
+    EXPECT_EQ(static_cast<int>(rc.mesh_triangles(i)), chair.mesh->visual.triangles[i / 3][i % 3]);
+  }
+  EXPECT_NE(rc.source().find("Scenic"), std::string::npos);  // the provenance, cited
 }
 
 }  // namespace

@@ -2,8 +2,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <string>
+
+#include "common/paths.h"
 
 namespace perch {
 namespace {
@@ -160,6 +163,39 @@ TEST(Filmstrip, EachFrameIsCaptionedWithItsTimeAndLabel) {
   EXPECT_EQ(caption_ink(1), ink_of("1.25 s sit"));
   EXPECT_NE(ink_of("1"), ink_of("8"));  // glyphs differ
   EXPECT_EQ(Canvas::TextWidth("abc", 2), 3 * 8 - 2);
+}
+
+// A mesh chair is drawn from its triangles: the chair's pixels in the top view span its bounding
+// box (x by y, to the pixel scale), the seat target's green cross is on them, and the side view
+// shows the chair above the ground line.
+TEST(Filmstrip, ChairViewsDrawAMeshChairToScaleWithItsSeatTarget) {
+  if (SharedDir().empty()) GTEST_SKIP() << "../shared is absent";
+  const Chair chair = Chair::Load(ResolveProjectPath("data/chairs/meshes/dining_scenic.json"));
+  const int px = 300;
+  const Canvas c = RenderChairViews(chair, px);
+  ASSERT_EQ(c.width(), 2 * px + 1);
+  auto brown = [](Rgb p) { return p.r > p.g + 15 && p.g > p.b + 10; };
+  auto green = [](Rgb p) { return p.g > 120 && p.r < 80 && p.b < 100; };
+  int x0 = px, x1 = -1, y0 = px, y1 = -1, greens = 0, side_brown = 0;
+  for (int y = 0; y < px; ++y) {
+    for (int x = 0; x < px; ++x) {
+      const Rgb p = c.at(x, y);
+      if (green(p)) ++greens;
+      if (!brown(p)) continue;
+      x0 = std::min(x0, x);
+      x1 = std::max(x1, x);
+      y0 = std::min(y0, y);
+      y1 = std::max(y1, y);
+    }
+    for (int x = px + 1; x < 2 * px + 1; ++x) side_brown += brown(c.at(x, y));
+  }
+  ASSERT_GT(x1, x0);
+  const Eigen::Vector3d size = chair.mesh->visual.Bounds().sizes();
+  const double scale = px / std::max(1.0, size.maxCoeff() + 0.5);  // the renderer's px per m
+  EXPECT_NEAR((x1 - x0 + 1) / scale, size.x(), 0.02);
+  EXPECT_NEAR((y1 - y0 + 1) / scale, size.y(), 0.02);
+  EXPECT_GT(greens, 20);
+  EXPECT_GT(side_brown, 2000);
 }
 
 TEST(Canvas, PngRoundTripAndFailedSaveLeavesNothing) {

@@ -125,6 +125,8 @@ world.add(new THREE.AxesHelper(0.5));  // recording axes at the origin: x red, y
 const bodyMaterial = new THREE.MeshStandardMaterial({ color: COLORS.body, roughness: 0.55 });
 const pelvisMaterial = new THREE.MeshStandardMaterial({ color: COLORS.pelvis, roughness: 0.55 });
 const chairMaterial = new THREE.MeshStandardMaterial({ color: COLORS.chair, roughness: 0.7 });
+// Mesh files need not wind their triangles consistently: both sides are drawn.
+const chairMeshMaterial = new THREE.MeshStandardMaterial({ color: COLORS.chair, roughness: 0.7, side: THREE.DoubleSide });
 
 let humanoid = null;   // { group, bodies: [THREE.Group], names: Map(name -> index), pelvis }
 const chair = new THREE.Group();
@@ -202,7 +204,20 @@ function buildChair(ep) {
   disposeTree(chair);
   chair.clear();
   const c = ep.chair;
-  if (!c || c.boxes.length === 0) return false;
+  const hasMesh = c && c.mesh_triangles.length > 0;
+  if (!c || (c.boxes.length === 0 && !hasMesh)) return false;
+  if (hasMesh) {
+    // A mesh chair: its triangles travel in the recording (the mesh file is not needed).
+    const geo = new THREE.BufferGeometry();
+    geo.setAttribute('position', new THREE.Float32BufferAttribute(c.mesh_vertices, 3));
+    geo.setIndex(c.mesh_triangles);
+    geo.computeVertexNormals();
+    const m = new THREE.Mesh(geo, chairMeshMaterial);
+    m.name = 'mesh';
+    m.castShadow = true;
+    m.receiveShadow = true;
+    chair.add(m);
+  }
   for (const box of c.boxes) {
     if (box.min.length !== 3 || box.max.length !== 3) continue;
     const size = box.max.map((v, i) => Math.max(1e-4, v - box.min[i]));

@@ -117,6 +117,16 @@ function validate(rec, fail) {
   const nb = rec.bodies.length;
   if (nb === 0) fail('corrupt: the recording has no bodies');
   rec.episodes.forEach((ep, e) => {
+    const c = ep.chair;
+    if (c && (c.mesh_vertices.length > 0 || c.mesh_triangles.length > 0)) {
+      const where = `episode ${ep.index} (#${e}) chair ${c.name}`;
+      const nv = c.mesh_vertices.length / 3;
+      if (!Number.isInteger(nv)) fail(`corrupt: ${where} has ${c.mesh_vertices.length} mesh_vertices values, not a multiple of 3`);
+      if (c.mesh_triangles.length % 3 !== 0) fail(`corrupt: ${where} has ${c.mesh_triangles.length} mesh_triangles values, not a multiple of 3`);
+      for (const i of c.mesh_triangles) {
+        if (i >= nv) fail(`corrupt: ${where} names mesh vertex ${i} of ${nv}`);
+      }
+    }
     ep.frames.forEach((fr, f) => {
       const where = `episode ${ep.index} (#${e}) frame ${f}`;
       if (fr.body_pos.length !== 3 * nb) fail(`corrupt: ${where} has ${fr.body_pos.length} body_pos values, expected ${3 * nb}`);

@@ -133,3 +133,20 @@ test('frames with the wrong number of body values are refused', () => {
   bad.episodes[1].frames[3].body_pos = bad.episodes[1].frames[3].body_pos.slice(3);
   refuses(codec.encodeRecordingFile(bad), /episode 1 \(#1\) frame 3 has 36 body_pos values, expected 39/);
 });
+
+// A mesh chair travels as triangles (docs/recording.md): they round-trip, and a triangle that
+// names a vertex the chair does not have is refused.
+test('a mesh chair round-trips and a bad triangle index is refused', () => {
+  const rec = makeSyntheticRecording();
+  const verts = [0, 0, 0.4, 0.4, 0, 0.4, 0, 0.4, 0.4, 0.4, 0.4, 0.4];
+  rec.episodes[0].chair = { name: 'mesh_chair', boxes: [], seat_target: [0.2, 0.2, 0.4],
+                            mesh_vertices: verts, mesh_triangles: [0, 1, 2, 1, 3, 2], source: 'test' };
+  const back = codec.readRecording(codec.encodeRecordingFile(rec), NAME);
+  close(back.episodes[0].chair.mesh_vertices, verts, 'mesh_vertices');
+  assert.deepEqual(back.episodes[0].chair.mesh_triangles, [0, 1, 2, 1, 3, 2]);
+  assert.equal(back.episodes[0].chair.source, 'test');
+  rec.episodes[0].chair.mesh_triangles = [0, 1, 4];
+  refuses(codec.encodeRecordingFile(rec), /chair mesh_chair names mesh vertex 4 of 4/);
+  rec.episodes[0].chair.mesh_triangles = [0, 1];
+  refuses(codec.encodeRecordingFile(rec), /2 mesh_triangles values, not a multiple of 3/);
+});

@@ -1,0 +1,108 @@
+// perch chair inspect: what a chair file holds and what was found from a mesh's geometry (seat
+// target, facing, collision), as text or JSON, with a top + side picture.
+#include <iostream>
+#include <string>
+
+#include "app/commands.h"
+#include "common/json_util.h"
+#include "envs/chair.h"
+#include "viz/filmstrip.h"
+
+namespace perch {
+namespace {
+
+Json Vec(const Eigen::Vector3d& v) { return Json::array({v.x(), v.y(), v.z()}); }
+
+Json InspectJson(const Chair& c, const std::string& path) {
+  Json j{{"file", path},
+         {"name", c.name},
+         {"kind", c.mesh ? "mesh" : "boxes"},
+         {"seat_target", Vec(c.seat_target)},
+         {"seat_height_m", c.seat_height()},
+         {"dynamic", c.dynamic},
+         {"mass_kg", c.mass},
+         {"backrest_front_x", c.backrest_front_x() ? Json(*c.backrest_front_x()) : Json()}};
+  if (!c.source.empty()) j["source"] = c.source;
+  if (!c.mesh) {
+    j["boxes"] = static_cast<int>(c.boxes.size());
+    return j;
+  }
+  const MeshChairInfo& m = c.mesh->info;
+  j["mesh"] = {{"path", m.mesh_path},           {"scale", m.scale},
+               {"up_axis", m.up_axis},          {"vertices", m.mesh_vertices},
+               {"triangles", m.mesh_triangles}, {"size_m", Vec(m.size)}};
+  j["seat"] = {
+      {"source", m.seat_source}, {"file_coords", Vec(m.seat_file)}, {"area_m2", m.seat_area_m2}};
+  j["facing"] = {{"source", m.facing_source}, {"deg", m.facing_deg}};
+  j["collision"] = {{"kind", m.collision},
+                    {"parts", m.collision_parts},
+                    {"triangles", m.collision_triangles},
+                    {"mesh", m.collision_mesh_path.empty() ? Json() : Json(m.collision_mesh_path)}};
+  return j;
+}
+
+void PrintText(const Json& j) {
+  std::cout << "chair " << j["name"].get<std::string>() << " (" << j["file"].get<std::string>()
+            << "), " << j["kind"].get<std::string>() << "\n";
+  if (j.contains("source"))
+    std::cout << "  source       " << j["source"].get<std::string>() << "\n";
+  std::cout << "  seat target  " << j["seat_target"].dump() << " m (chair frame), height "
+            << j["seat_height_m"].get<double>() << " m\n";
+  std::cout << "  backrest     "
+            << (j["backrest_front_x"].is_null()
+                    ? std::string("none")
+                    : "front at x = " + j["backrest_front_x"].dump() + " m")
+            << "\n  body         " << (j["dynamic"].get<bool>() ? "dynamic, " : "static, ")
+            << j["mass_kg"].get<double>() << " kg\n";
+  if (j["kind"] == "mesh") {
+    const Json& m = j["mesh"];
+    std::cout << "  mesh         " << m["path"].get<std::string>() << ": " << m["vertices"]
+              << " vertices, " << m["triangles"] << " triangles, scale " << m["scale"] << ", up "
+              << m["up_axis"].get<std::string>() << ", size " << m["size_m"].dump() << " m\n";
+    std::cout << "  seat         " << j["seat"]["source"].get<std::string>() << " at "
+              << j["seat"]["file_coords"].dump() << " (file units and axes), upward area "
+              << j["seat"]["area_m2"] << " m2\n";
+    std::cout << "  facing       " << j["facing"]["deg"] << " deg from the file's +x ("
+              << j["facing"]["source"].get<std::string>() << ")\n";
+    std::cout << "  collision    " << j["collision"]["kind"].get<std::string>() << ", "
+              << j["collision"]["parts"] << " part(s), " << j["collision"]["triangles"]
+              << " triangles\n";
+  }
+}
+
+}  // namespace
+
+void RegisterChairCommands(CLI::App& root, CLI::App& /*bench*/) {
+  CLI::App* chair = root.add_subcommand("chair", "Chair files: inspect what a file describes");
+  chair->require_subcommand(1);
+  struct Opts {
+    std::string file, png;
+    bool json = false;
+    int px = 320;
+  };
+  auto o = std::make_shared<Opts>();
+  CLI::App* ins = chair->add_subcommand(
+      "inspect",
+      "Load a chair file (a preset name or a .json, boxes or mesh) and print its seat "
+      "target, facing and collision, as found from the mesh where not given");
+  ins->add_option("file", o->file, "chair preset or chair file (.json)")->required();
+  ins->add_flag("--json", o->json, "print one JSON object on stdout");
+  ins->add_option("--png", o->png, "write a picture: top and side views, seat target, facing");
+  ins->add_option("--px", o->px, "size of each view in pixels")->check(CLI::Range(64, 2048));
+  ins->callback([o] {
+    const std::string path = Chair::ResolvePath(o->file);
+    const Chair c = Chair::Load(path);
+    const Json j = InspectJson(c, path);
+    if (o->json) {
+      std::cout << j.dump(2) << "\n";
+    } else {
+      PrintText(j);
+    }
+    if (!o->png.empty()) {
+      RenderChairViews(c, o->px).SavePng(o->png);
+      std::cerr << "chair inspect: picture -> " << o->png << "\n";
+    }
+  });
+}
+
+}  // namespace perch
