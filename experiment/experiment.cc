@@ -4,6 +4,7 @@
 #include <array>
 
 #include "common/config_file.h"
+#include "common/field_text.h"
 #include "hierarchy/meta_env.h"
 #include "tasks/task_env.h"
 
@@ -152,23 +153,6 @@ Json ConfigFieldTables() {
   return t;
 }
 
-namespace {
-
-void FieldRows(const Json& rows, const std::string& prefix,
-               std::vector<std::array<std::string, 4>>* out) {
-  for (const Json& r : rows) {
-    const std::string name = prefix + "." + r["name"].get<std::string>();
-    if (r.contains("fields")) {
-      FieldRows(r["fields"], name, out);
-      continue;
-    }
-    out->push_back({name, r.contains("default") ? r["default"].dump() : "", r.value("rule", ""),
-                    r.value("doc", "")});
-  }
-}
-
-}  // namespace
-
 std::string ConfigFieldsText(const std::string& section, bool json) {
   const Json all = ConfigFieldTables();
   Json pick = Json::object();
@@ -184,25 +168,13 @@ std::string ConfigFieldsText(const std::string& section, bool json) {
     throw ConfigError("--fields: unknown section \"" + section + "\" (" + known + ", all)");
   }
   if (json) return pick.dump(2) + "\n";
-  std::vector<std::array<std::string, 4>> rows;
+  std::vector<std::pair<std::string, Json>> tables;
   for (auto it = pick.begin(); it != pick.end(); ++it) {
     // A task's section sits under env in a config.
     const bool task = FindTask(it.key()) != nullptr;
-    FieldRows(it.value(), task ? "env." + it.key() : it.key(), &rows);
+    tables.push_back({task ? "env." + it.key() : it.key(), it.value()});
   }
-  size_t w0 = 0, w1 = 0;
-  for (const auto& r : rows) {
-    w0 = std::max(w0, r[0].size());
-    w1 = std::max(w1, std::min<size_t>(r[1].size(), 24));
-  }
-  std::string out;
-  for (const auto& r : rows) {
-    std::string line = r[0] + std::string(w0 + 2 - r[0].size(), ' ') + r[1];
-    line += std::string(r[1].size() < w1 + 2 ? w1 + 2 - r[1].size() : 2, ' ') + r[3];
-    if (!r[2].empty()) line += " (" + r[2] + ")";
-    out += line + "\n";
-  }
-  return out;
+  return DescribedFieldsText(tables);
 }
 
 std::string CompatKey(const ExperimentConfig& c, const PolicyConfig& policy) {

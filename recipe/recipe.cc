@@ -7,6 +7,7 @@
 #include <regex>
 #include <set>
 
+#include "common/field_text.h"
 #include "common/file_util.h"
 
 namespace perch {
@@ -203,21 +204,7 @@ const FieldTable<RecipeStage>& RecipeStageFields() {
 std::string RecipeFieldsText(bool json) {
   const Json stage = RecipeStageFields().Describe();
   if (json) return Json{{"stage", stage}}.dump(2) + "\n";
-  std::string out;
-  std::function<void(const Json&, const std::string&)> rows = [&](const Json& t,
-                                                                  const std::string& prefix) {
-    for (const Json& r : t) {
-      const std::string name = prefix + r["name"].get<std::string>();
-      if (r.contains("fields")) {
-        rows(r["fields"], name + ".");
-        continue;
-      }
-      out += name + "  " + (r.contains("default") ? r["default"].dump() : "") + "  " +
-             r.value("rule", "") + "  " + r.value("doc", "") + "\n";
-    }
-  };
-  rows(stage, "stages[].");
-  return out;
+  return DescribedFieldsText({{"stages[]", stage}});
 }
 
 namespace {

@@ -381,7 +381,9 @@ TEST(RecipeFormat, EveryStageFieldIsReadAndWrittenByItsTable) {
     if (n == "select") continue;
     EXPECT_THAT(text, ::testing::HasSubstr("stages[]." + n + "  ")) << n;
   }
-  EXPECT_THAT(text, ::testing::HasSubstr("stages[].select.last_k  0  must be in 0..50"));
+  // Aligned columns as perch config --fields prints them: name, default, doc (rule).
+  EXPECT_THAT(text, ::testing::ContainsRegex("stages\\[\\]\\.select\\.last_k +0 +evaluate the "
+                                             "newest K[^\n]*\\(must be in 0\\.\\.50\\)\n"));
   EXPECT_EQ(Json::parse(RecipeFieldsText(true))["stage"].size(), names.size());
 }
 
