@@ -268,7 +268,13 @@ test('the HUD and the episode selector', async () => {
   await seek(1, 39);
   const torso = await bodyWorld('torso');
   assert.ok(near(torso, rec.episodes[1].frames[39].body_pos.slice(0, 3), 1e-4), `fallen torso at ${torso}`);
-  await shot('fell.png');
+  const fell = await shot('fell.png');
+  // Episode 1's chair is a mesh (its triangles in the recording, no boxes): drawn where it is.
+  const mesh = await page.evaluate(() => perchViewer.chairBoxWorld('mesh'));
+  assert.ok(mesh && near(mesh, [1.5, -1.5, 0], 1e-5), `mesh chair at ${mesh}`);
+  const seatTop = await project([1.5, -1.5, 0.45]);
+  assert.ok(isChair(fell.pixel(...seatTop)), `mesh seat top pixel ${seatTop} is chair-coloured: ${fell.pixel(...seatTop)}`);
+  assert.ok(region(fell, isChair).n > 500, 'mesh chair pixels');
 
   await page.click('#next-ep');
   assert.deepEqual(await state(), { episode: 2, frame: 0, numFrames: 30, numEpisodes: 3, playing: false });

@@ -80,9 +80,30 @@ export const CHAIR = {
   seat_target: [0.0, 0.0, 0.56],
 };
 
+// A mesh chair (as a recording carries one: triangles in the chair frame): a 0.5 m seat block
+// 0.45 m high and a backrest slab, 24 triangles.
+function blockTriangles(min, max, base) {
+  const v = [];
+  for (let k = 0; k < 8; k++) v.push((k & 1) ? max[0] : min[0], (k & 2) ? max[1] : min[1], (k & 4) ? max[2] : min[2]);
+  const quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+  const t = [];
+  for (const q of quads) t.push(base + q[0], base + q[1], base + q[2], base + q[0], base + q[2], base + q[3]);
+  return { v, t };
+}
+const seatBlock = blockTriangles([-0.25, -0.25, 0], [0.25, 0.25, 0.45], 0);
+const backSlab = blockTriangles([-0.33, -0.25, 0], [-0.25, 0.25, 0.95], 8);
+export const MESH_CHAIR = {
+  name: 'synthetic_mesh_chair',
+  boxes: [],
+  seat_target: [0.0, 0.0, 0.45],
+  mesh_vertices: [...seatBlock.v, ...backSlab.v],
+  mesh_triangles: [...seatBlock.t, ...backSlab.t],
+  source: 'synthetic',
+};
+
 // Episode 0 ("success"): the humanoid slides from (x0, 0) to (x1, 0) over `frames` frames (known
 // pelvis path), a chair at `chairPos` with yaw `chairYaw`, a walk target and a meta target.
-// Episode 1 ("fell"): pitches forward about its feet, chair elsewhere. Episode 2 ("time_limit"):
+// Episode 1 ("fell"): pitches forward about its feet, a mesh chair elsewhere. Episode 2 ("time_limit"):
 // no chair, turning in place.
 export const SYNTH = {
   frames: 91, x0: 0, x1: 1.5, chairPos: [1.0, 1.6, 0], chairYaw: -0.7,
@@ -141,7 +162,7 @@ export function makeSyntheticRecording(opts = {}) {
     joint_names: hum.jointNames,
     episodes: [
       { index: 0, seed: 100, outcome: 'success', success: true, fell: false, chair: CHAIR, frames: ep0 },
-      { index: 1, seed: 101, outcome: 'fell', success: false, fell: true, chair: CHAIR, frames: ep1 },
+      { index: 1, seed: 101, outcome: 'fell', success: false, fell: true, chair: MESH_CHAIR, frames: ep1 },
       { index: 2, seed: '12345678901234567891', outcome: 'time_limit', success: false, fell: false, frames: ep2 },
     ],
   };
