@@ -95,6 +95,24 @@ struct View {
   }
 };
 
+// Painter's depths of the same items for the side view (mean y: farther first) and the top view
+// (highest point: lower first).
+void SideAndTopDepths(const std::vector<Item>& items, std::vector<Item>* side,
+                      std::vector<Item>* top) {
+  *side = items;
+  *top = items;
+  for (auto& it : *side) {
+    double y = 0;
+    for (const auto& c : it.corners) y += c.y() / static_cast<double>(it.corners.size());
+    it.depth = y;
+  }
+  for (auto& it : *top) {
+    double z = 0;
+    for (const auto& c : it.corners) z = std::max(z, c.z());
+    it.depth = -z;
+  }
+}
+
 void DrawPanel(Canvas& panel, const View& view, const std::vector<Item>& items_in,
                const std::vector<Eigen::Vector2d>& targets) {
   // Grid every 0.5 m, then the ground line in the side view.
@@ -154,8 +172,8 @@ Canvas RenderFilmstrip(const HumanoidModel& model, const Chair* chair,
   if (frames.empty()) throw std::runtime_error("RenderFilmstrip: no frames");
   const int px = options.panel_px;
   // Chair items are the same in every frame.
-  std::vector<Item> chair_items;
-  if (chair) chair_items = ChairItems(*chair, chair_pose);
+  std::vector<Item> chair_side, chair_top;
+  if (chair) SideAndTopDepths(ChairItems(*chair, chair_pose), &chair_side, &chair_top);
   // One fixed window over all roots and the chair, unless following.
   Eigen::Vector2d lo(1e9, 1e9), hi(-1e9, -1e9);
   for (const auto& f : frames) {
@@ -185,17 +203,7 @@ Canvas RenderFilmstrip(const HumanoidModel& model, const Chair* chair,
     if (static_cast<int>(f.q.size()) != model.num_joints())
       throw std::runtime_error("RenderFilmstrip: frame has wrong number of joint angles");
     const FkResult fk = ForwardKinematics(model, f.root_pos, f.root_quat, f.q.data());
-    std::vector<Item> side = chair_items, top = chair_items;
-    for (auto& it : side) {
-      double y = 0;
-      for (const auto& c : it.corners) y += c.y() / static_cast<double>(it.corners.size());
-      it.depth = y;
-    }
-    for (auto& it : top) {
-      double z = 0;
-      for (const auto& c : it.corners) z = std::max(z, c.z());
-      it.depth = -z;
-    }
+    std::vector<Item> side = chair_side, top = chair_top;
     for (int bi = 0; bi < model.num_bodies(); ++bi) {
       const Body& body = model.body(bi);
       for (const Geom& g : body.geoms) {
@@ -247,17 +255,8 @@ Canvas RenderChairViews(const Chair& chair, int panel_px) {
   const Eigen::Vector3d mid = box.center();
   const View tv{true, mid.x(), mid.y(), scale, panel_px};
   const View sv{false, mid.x(), mid.z(), scale, panel_px};
-  std::vector<Item> top = items, side = items;
-  for (auto& it : side) {
-    double y = 0;
-    for (const auto& c : it.corners) y += c.y() / static_cast<double>(it.corners.size());
-    it.depth = y;
-  }
-  for (auto& it : top) {
-    double z = -1e9;
-    for (const auto& c : it.corners) z = std::max(z, c.z());
-    it.depth = -z;
-  }
+  std::vector<Item> side, top;
+  SideAndTopDepths(items, &side, &top);  // a chair stands on z = 0: no corner below the floor
   Canvas top_panel(panel_px, panel_px, kBackground), side_panel(panel_px, panel_px, kBackground);
   DrawPanel(top_panel, tv, top, {});
   DrawPanel(side_panel, sv, side, {});
