@@ -15,8 +15,12 @@
 #include <deque>
 #include <fstream>
 #include <iterator>
+#include <mutex>
+#include <random>
+#include <set>
 #include <stdexcept>
 #include <thread>
+#include <utility>
 
 namespace perch {
 
@@ -92,21 +96,70 @@ std::string DescribeStatus(int status) {
   return "status " + std::to_string(status);
 }
 
-int PickFreePort() {
+namespace {
+
+// Whether nothing listens on `port` (any address) at this moment.
+bool PortBindable(int port) {
   const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) throw std::runtime_error("socket() failed");
+  if (fd < 0) return false;
   sockaddr_in addr{};
   addr.sin_family = AF_INET;
-  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  addr.sin_port = 0;
-  if (::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
-    ::close(fd);
-    throw std::runtime_error("bind to an ephemeral port failed");
-  }
-  socklen_t len = sizeof(addr);
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
+  addr.sin_addr.s_addr = htonl(INADDR_ANY);
+  addr.sin_port = htons(static_cast<uint16_t>(port));
+  const bool ok = ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) == 0;
   ::close(fd);
-  return ntohs(addr.sin_port);
+  return ok;
+}
+
+// The kernel's range for outgoing connections' local ports ("32768 60999" by default).
+std::pair<int, int> EphemeralRange() {
+  std::ifstream f("/proc/sys/net/ipv4/ip_local_port_range");
+  int lo = 32768, hi = 60999;
+  if (!(f >> lo >> hi) || lo <= 0 || hi < lo) return {32768, 60999};
+  return {lo, hi};
+}
+
+}  // namespace
+
+int PickFreePort() {
+  // Ports are drawn below the ephemeral range: a port from bind(0) lies inside it, where any
+  // outgoing connection (another run's actors) may take it between the pick and the learner's
+  // bind; two stages started side by side failed that way. A port is handed out once per
+  // process, so two picks in one process never collide.
+  static std::mutex mu;
+  static std::set<int> given;
+  static std::mt19937 rng(std::random_device{}() ^ static_cast<unsigned>(::getpid()));
+  std::lock_guard<std::mutex> g(mu);
+  const auto [lo, hi] = EphemeralRange();
+  const int top = lo - 1;
+  const int bottom = std::max(1024, top - 12000);
+  if (top > bottom + 100) {
+    std::uniform_int_distribution<int> pick(bottom, top);
+    for (int attempt = 0; attempt < 200; ++attempt) {
+      const int port = pick(rng);
+      if (given.count(port) || !PortBindable(port)) continue;
+      given.insert(port);
+      return port;
+    }
+  }
+  for (int attempt = 0; attempt < 64; ++attempt) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    if (fd < 0) throw std::runtime_error("socket() failed");
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    addr.sin_port = 0;
+    if (::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0) {
+      ::close(fd);
+      throw std::runtime_error("bind to an ephemeral port failed");
+    }
+    socklen_t len = sizeof(addr);
+    ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
+    ::close(fd);
+    const int port = ntohs(addr.sin_port);
+    if (given.insert(port).second) return port;
+  }
+  throw std::runtime_error("no free TCP port found");
 }
 
 double RestartPolicy::OnFailure(const std::string& what, double now) {

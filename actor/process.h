@@ -28,7 +28,8 @@ int Stop(pid_t pid, double grace_s);
 // "exited 0", "killed by signal 9", ...
 std::string DescribeStatus(int status);
 
-// A TCP port on 127.0.0.1 that was free a moment ago (bind to port 0, read it back, close).
+// A TCP port that was free a moment ago, drawn below the kernel's ephemeral range (so no
+// outgoing connection takes it before it is bound) and never handed out twice in one process.
 int PickFreePort();
 
 // When `perch train` restarts a child that died (issue 17): exponential backoff from base_s,

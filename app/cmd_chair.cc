@@ -1,11 +1,17 @@
 // perch chair inspect: what a chair file holds and what was found from a mesh's geometry (seat
-// target, facing, collision), as text or JSON, with a top + side picture.
+// target, facing, collision), as text or JSON, with a top + side picture. perch chair generate:
+// chair files drawn from a chair_random distribution on a seed (held-out chairs).
+#include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <string>
 
 #include "app/commands.h"
+#include "common/config_file.h"
 #include "common/json_util.h"
+#include "common/rng.h"
 #include "envs/chair.h"
+#include "envs/chair_random.h"
 #include "viz/filmstrip.h"
 
 namespace perch {
@@ -31,8 +37,10 @@ Json InspectJson(const Chair& c, const std::string& path) {
   j["mesh"] = {{"path", m.mesh_path},           {"scale", m.scale},
                {"up_axis", m.up_axis},          {"vertices", m.mesh_vertices},
                {"triangles", m.mesh_triangles}, {"size_m", Vec(m.size)}};
-  j["seat"] = {
-      {"source", m.seat_source}, {"file_coords", Vec(m.seat_file)}, {"area_m2", m.seat_area_m2}};
+  j["seat"] = {{"source", m.seat_source},
+               {"file_coords", Vec(m.seat_file)},
+               {"area_m2", m.seat_area_m2},
+               {"moved_forward_m", m.seat_moved_forward_m}};
   j["facing"] = {{"source", m.facing_source}, {"deg", m.facing_deg}};
   j["collision"] = {{"kind", m.collision},
                     {"parts", m.collision_parts},
@@ -61,7 +69,12 @@ void PrintText(const Json& j) {
               << m["up_axis"].get<std::string>() << ", size " << m["size_m"].dump() << " m\n";
     std::cout << "  seat         " << j["seat"]["source"].get<std::string>() << " at "
               << j["seat"]["file_coords"].dump() << " (file units and axes), upward area "
-              << j["seat"]["area_m2"] << " m2\n";
+              << j["seat"]["area_m2"] << " m2";
+    if (j["seat"]["moved_forward_m"].get<double>() > 0.0) {
+      std::cout << ", moved " << j["seat"]["moved_forward_m"]
+                << " m forward from its centre (a deep seat)";
+    }
+    std::cout << "\n";
     std::cout << "  facing       " << j["facing"]["deg"] << " deg from the file's +x ("
               << j["facing"]["source"].get<std::string>() << ")\n";
     std::cout << "  collision    " << j["collision"]["kind"].get<std::string>() << ", "
@@ -101,6 +114,57 @@ void RegisterChairCommands(CLI::App& root, CLI::App& /*bench*/) {
     if (!o->png.empty()) {
       RenderChairViews(c, o->px).SavePng(o->png);
       std::cerr << "chair inspect: picture -> " << o->png << "\n";
+    }
+  });
+
+  struct GenOpts {
+    std::string dir, config;
+    uint64_t seed = 0;
+    int count = 20;
+    bool json = false;
+  };
+  auto g = std::make_shared<GenOpts>();
+  CLI::App* gen = chair->add_subcommand(
+      "generate",
+      "Write chair files drawn from a chair_random distribution (a config's env.chair_random, "
+      "or the defaults) on a seed: held-out chairs for perch eval --chair DIR");
+  gen->add_option("--dir", g->dir, "folder to write gen_<seed>_<k>.json into")->required();
+  gen->add_option("--seed", g->seed, "the draw's seed")->required();
+  gen->add_option("--count", g->count, "how many chairs")->check(CLI::Range(1, 10000));
+  gen->add_option("--config", g->config,
+                  "an experiment or env config whose env.chair_random gives the ranges");
+  gen->add_flag("--json", g->json, "print the written files as one JSON object");
+  gen->callback([g] {
+    Json section = Json::object();
+    if (!g->config.empty()) {
+      const Json j = LoadComposedConfig(g->config);
+      const Json& env = j.contains("env") && j["env"].is_object() ? j["env"] : j;
+      if (env.contains("chair_random")) section = env["chair_random"];
+    }
+    const ChairRandomConfig ranges = EnvConfig::FromJson(Json{{"chair_random", section}},
+                                                         g->config.empty() ? "defaults" : g->config)
+                                         .chair_random;
+    namespace fs = std::filesystem;
+    fs::create_directories(g->dir);
+    Rng rng(g->seed);
+    Json files = Json::array();
+    for (int k = 0; k < g->count; ++k) {
+      const std::string name = "gen_" + std::to_string(g->seed) + "_" + std::to_string(k);
+      const std::string path = (fs::path(g->dir) / (name + ".json")).string();
+      if (fs::exists(path)) {
+        throw ConfigError(path + ": exists; perch chair generate never overwrites a chair file");
+      }
+      Json c = RandomChairJson(ranges, rng, name);
+      c["_comment"] = "Drawn by perch chair generate --seed " + std::to_string(g->seed) +
+                      " (chair " + std::to_string(k) + ")";
+      Chair::FromJson(c, path);  // what is written loads
+      std::ofstream(path) << c.dump(2) << "\n";
+      files.push_back(path);
+    }
+    if (g->json) {
+      std::cout << Json{{"seed", g->seed}, {"count", g->count}, {"files", files}}.dump(2) << "\n";
+    } else {
+      std::cerr << "chair generate: " << g->count << " chair file(s) -> " << g->dir << "\n";
     }
   });
 }

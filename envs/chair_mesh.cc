@@ -128,6 +128,7 @@ struct FoundSeat {
   double height = 0.0;
   Eigen::Vector2d centre = Eigen::Vector2d::Zero();
   double area = 0.0;
+  double z_lo = 0.0, z_hi = 0.0;  // the band's upward triangles have centroids in [z_lo, z_hi]
 };
 
 // The band of `finder.band` at sitting height with the most upward-facing area (z-up, floor 0).
@@ -160,6 +161,8 @@ std::optional<FoundSeat> FindSeat(const TriMesh& m, const SeatFinderConfig& find
     sum -= up[lo].area;
   }
   FoundSeat s;
+  s.z_lo = up[best_lo].z;
+  s.z_hi = up[best_hi - 1].z;
   for (size_t i = best_lo; i < best_hi; ++i) {
     s.area += up[i].area;
     s.height += up[i].area * up[i].z;
@@ -432,7 +435,8 @@ MeshChair LoadMeshChair(const Json& j, const std::string& ctx, bool need_convex,
   for (Eigen::Vector3d& v : metric.vertices) v.z() -= floor_z;
 
   // Seat: given (file units and axes) or the largest upward surface at sitting height.
-  Eigen::Vector3d seat;  // metric, floor at 0
+  Eigen::Vector3d seat;                                 // metric, floor at 0
+  Eigen::Vector2d seat_band = Eigen::Vector2d::Zero();  // the found seat's [z_lo, z_hi] [m]
   if (j.contains("seat")) {
     std::vector<double> s;
     GetRequired(j, "seat", s, ctx);
@@ -451,6 +455,7 @@ MeshChair LoadMeshChair(const Json& j, const std::string& ctx, bool need_convex,
     }
     seat = Eigen::Vector3d(found->centre.x(), found->centre.y(), found->height);
     info.seat_area_m2 = found->area;
+    seat_band = Eigen::Vector2d(found->z_lo, found->z_hi);
     info.seat_source = "found";
   }
   // Facing: given, away from the backrest, or the file's +x.
@@ -466,6 +471,33 @@ MeshChair LoadMeshChair(const Json& j, const std::string& ctx, bool need_convex,
     info.facing_source = "backrest";
   } else {
     info.facing_source = "default";
+  }
+  // A deep seat's target: at most max_front_depth behind the front edge of the seat surface
+  // (its foremost point within back_half_width of the target, in the facing direction).
+  if (info.seat_source == "found") {
+    const Eigen::Vector2d fwd(std::cos(facing), std::sin(facing));
+    const Eigen::Vector3d f3(fwd.x(), fwd.y(), 0.0), left(-fwd.y(), fwd.x(), 0.0);
+    const Eigen::Vector3d at(seat.x(), seat.y(), 0.0);
+    std::optional<double> front;
+    for (const auto& t : metric.triangles) {
+      double a = 0.0;
+      const Eigen::Vector3d n = TriNormalArea(metric, t, &a);
+      const double cz = Centroid(metric, t).z();
+      if (a <= 0.0 || n.z() < finder.upward_cos || cz < seat_band.x() || cz > seat_band.y()) {
+        continue;
+      }
+      Polygon p = Tri(metric, t);
+      p = Clip(p, left, left.dot(at) - finder.back_half_width);
+      p = Clip(p, -left, -left.dot(at) - finder.back_half_width);
+      for (const Eigen::Vector3d& v : p) {
+        const double x = f3.dot(v - at);
+        if (!front || x > *front) front = x;
+      }
+    }
+    if (front && *front > finder.max_front_depth) {
+      info.seat_moved_forward_m = *front - finder.max_front_depth;
+      seat.head<2>() += info.seat_moved_forward_m * fwd;
+    }
   }
   // Chair frame: origin on the floor under the seat target, facing +x.
   Eigen::Isometry3d to_chair = Eigen::Isometry3d::Identity();

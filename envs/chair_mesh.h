@@ -47,6 +47,11 @@ struct SeatFinderConfig {
   double min_back_offset = 0.03;  // a backrest centroid closer than this to the seat says nothing
   double back_half_width = 0.15;  // |y| of the backrest's front face the spawn looks at [m]
   double back_above_seat_min = 0.05;  // ... and its height above the seat [m]
+  // A found seat target lies at most this far behind the seat surface's front edge (within
+  // back_half_width of it) [m]: where a person sits on a deep seat (a sofa), not its centre. The
+  // authors' chair has its target 0.206 m behind its front edge; the sit's start is placed from
+  // the target, so a target 0.34 m deep (the sofa's centre) starts the humanoid inside the sofa.
+  double max_front_depth = 0.21;
 };
 
 // What a mesh chair's file said and what was found from its geometry (`perch chair inspect`).
@@ -59,6 +64,8 @@ struct MeshChairInfo {
   Eigen::Vector3d seat_file = Eigen::Vector3d::Zero();  // seat target in the file's own units/axes
   std::string seat_source;                              // "file" or "found"
   double seat_area_m2 = 0.0;  // upward area of the found seat surface (0 when given)
+  double seat_moved_forward_m =
+      0.0;                    // a deep seat's target moved from the centre (max_front_depth)
   double facing_deg = 0.0;    // about the up axis from the file's +x (after the up-axis turn)
   std::string facing_source;  // "file", "backrest" or "default" (nothing behind the seat)
   std::string collision;      // "triangle mesh", "file parts" or "convex decomposition"

@@ -55,7 +55,10 @@ const FieldTable<ObsConfig>& ObsFields() {
           .Add("joint_speed_scale", &C::joint_speed_scale, "qdot_n = scale x qdot [s/rad]")
           .Add("clip", &C::clip, "every feature is clipped to [-clip, clip]", Positive<double>())
           .Add("foot_contact_lag", &C::foot_contact_lag,
-               "the flags in an observation are one step old (authors)");
+               "the flags in an observation are one step old (authors)")
+          .Add("chair_grid_spacing", &C::chair_grid_spacing,
+               "proprio_chair_shape: spacing of the 5 x 5 chair height grid [m]",
+               Positive<double>());
   return t;
 }
 
@@ -167,7 +170,11 @@ const FieldTable<ChairRandomConfig>& ChairRandomFields() {
           .Add("armrest_height", &C::armrest_height, "[lo, hi] m", Metres())
           .Add("mass", &C::mass, "[kg]", Positive<double>())
           .Add("dynamic", &C::dynamic, "a body that can move (else static)")
+          .Add("files", &C::files, "chair files (presets or .json) among the random chairs")
+          .Add("files_prob", &C::files_prob, "share of random chairs drawn from files",
+               InRange<double>(0, 1, "must be in [0, 1]"))
           .Rule([](const C& c, const std::string& ctx) {
+            if (c.files_prob > 0 && c.files.empty()) return ctx + ".files_prob: no files given";
             if (c.seat_thickness[1] >= c.seat_height[0]) {
               return ctx + ".seat_thickness: must stay below seat_height";
             }
@@ -176,6 +183,24 @@ const FieldTable<ChairRandomConfig>& ChairRandomFields() {
             }
             return std::string();
           });
+  return t;
+}
+
+const FieldTable<DomainRandomConfig>& DomainRandomFields() {
+  using C = DomainRandomConfig;
+  auto scale = Satisfies<std::array<double, 2>>(
+      [](const std::array<double, 2>& r) { return r[0] > 0.0 && r[0] <= r[1] && r[1] <= 10.0; },
+      "expected [lo, hi] with 0 < lo <= hi <= 10");
+  static const FieldTable<C> t =
+      FieldTable<C>()
+          .Add("obs_noise_std", &C::obs_noise_std, "Gaussian noise on every observation entry",
+               NonNegative<double>())
+          .Add("act_noise_std", &C::act_noise_std,
+               "Gaussian noise on every action entry (before clipping)", NonNegative<double>())
+          .Add("friction_scale", &C::friction_scale,
+               "[lo, hi]: per episode x floor, humanoid and chair friction", scale)
+          .Add("mass_scale", &C::mass_scale,
+               "[lo, hi]: per episode x the humanoid's body masses and inertias", scale);
   return t;
 }
 
@@ -223,7 +248,7 @@ const FieldTable<EnvConfig>& EnvConfigFields() {
               })
           .Add("pd_implicit", &C::pd_implicit, "pd: implicit (stable) PD")
           .Custom(
-              "obs_layout", "proprio, proprio_goal or proprio_chair",
+              "obs_layout", "proprio, proprio_goal, proprio_chair or proprio_chair_shape",
               [](const Json& j, C& c, const std::string& ctx) {
                 std::string layout;
                 GetOptional(j, "obs_layout", layout, ctx);
@@ -235,6 +260,8 @@ const FieldTable<EnvConfig>& EnvConfigFields() {
           .Nested("init", &C::init, InitFields(), "the start pose")
           .Nested("safety", &C::safety, SafetyFields(), "limits beyond which an episode is invalid")
           .Nested("push", &C::push, PushFields(), "random pushes")
+          .Nested("randomize", &C::randomize, DomainRandomFields(),
+                  "training noise and per-episode physics scales")
           .Add("seat_contact_max_pelvis_z", &C::seat_contact_max_pelvis_z,
                "contact = pelvis touches chair and pelvis z < this [m]")
           .Add("seat_contact_relative", &C::seat_contact_relative,
@@ -257,8 +284,12 @@ std::string EnvConfig::HumanoidPath() const { return Resolve(humanoid_file); }
 
 std::string EnvConfig::ChairPath() const {
   if (chair == "none") return "";
-  if (chair.size() > 5 && chair.substr(chair.size() - 5) == ".json") return Resolve(chair);
-  return Chair::PresetPath(chair);
+  return ChairFilePath(chair);
+}
+
+std::string EnvConfig::ChairFilePath(const std::string& c) {
+  if (c.size() > 5 && c.substr(c.size() - 5) == ".json") return Resolve(c);
+  return Chair::PresetPath(c);
 }
 
 std::string EnvConfig::QposPath() const { return Resolve(init.qpos_file); }
@@ -267,7 +298,10 @@ ObsLayout ObsLayoutFromName(const std::string& name, const std::string& ctx) {
   if (name == "proprio") return ObsLayout::kProprio;
   if (name == "proprio_goal") return ObsLayout::kProprioGoal;
   if (name == "proprio_chair") return ObsLayout::kProprioChair;
-  throw ConfigError(ctx + ": expected \"proprio\", \"proprio_goal\" or \"proprio_chair\", got \"" +
+  if (name == "proprio_chair_shape") return ObsLayout::kProprioChairShape;
+  throw ConfigError(ctx +
+                    ": expected \"proprio\", \"proprio_goal\", \"proprio_chair\" or "
+                    "\"proprio_chair_shape\", got \"" +
                     name + "\"");
 }
 
@@ -279,6 +313,8 @@ std::string ObsLayoutName(ObsLayout layout) {
       return "proprio_goal";
     case ObsLayout::kProprioChair:
       return "proprio_chair";
+    case ObsLayout::kProprioChairShape:
+      return "proprio_chair_shape";
   }
   return "?";
 }
@@ -291,6 +327,8 @@ int ObsLayoutDim(ObsLayout layout) {
       return 52;
     case ObsLayout::kProprioChair:
       return 57;
+    case ObsLayout::kProprioChairShape:
+      return 57 + kChairGridDim;
   }
   return 0;
 }

@@ -21,6 +21,9 @@ enum class ObsLayout {
   kProprio,       // more(6) joints(42) feet(2): 50, the paper's turn state (Sec. 4)
   kProprioGoal,   // more(6) joints(42) feet(2) goal(2): 52, walk policies
   kProprioChair,  // more(6) joints(42) feet(2) chair(7): 57, sit / meta policies
+  // more(6) joints(42) feet(2) chair(7) shape(25): 82, a sit that sees the chair's shape (ours,
+  // issue 51): the chair's top-surface heights on a 5 x 5 grid around the seat target.
+  kProprioChairShape,
 };
 
 struct ObsConfig {
@@ -29,6 +32,8 @@ struct ObsConfig {
   double joint_speed_scale = 0.1;  // qdot_n = scale x qdot [s/rad]
   double clip = 5.0;               // every feature is clipped to [-clip, clip]
   bool foot_contact_lag = true;    // authors: the flags in an observation are one step old
+  // proprio_chair_shape: spacing of the 5 x 5 chair height grid around the seat target [m].
+  double chair_grid_spacing = 0.15;
 };
 
 // Spawn positions in the chair frame (notes 6). zone 0: the fixed pose below; zones 1-3: on a
@@ -97,6 +102,22 @@ struct PushConfig {
   double until_s = 0.0;      // [s] > 0: nor from until_s on (pushes only near the start)
 };
 
+// Training perturbations beyond pushes (issue 49; ours, all off by default): Gaussian noise on
+// every observation entry and every action entry, and per-episode scales of the contact frictions
+// and of the humanoid's body masses (one factor each per episode, uniform in [lo, hi]). The env's
+// RNG is only drawn from for what is on, so a run without them draws as before.
+struct DomainRandomConfig {
+  double obs_noise_std = 0.0;                      // in each entry's own (observation) units
+  double act_noise_std = 0.0;                      // in action units (before clipping to [-1, 1])
+  std::array<double, 2> friction_scale{1.0, 1.0};  // x floor, humanoid and chair friction
+  std::array<double, 2> mass_scale{1.0, 1.0};      // x every humanoid body's mass and inertia
+  bool on() const {
+    return obs_noise_std > 0 || act_noise_std > 0 ||
+           friction_scale != std::array<double, 2>{1, 1} ||
+           mass_scale != std::array<double, 2>{1, 1};
+  }
+};
+
 // The `stand` task: reward for staying upright, early termination on falling, time limit.
 struct StandTaskConfig {
   double alive_bonus = 1.0;                        // per control step while up
@@ -123,6 +144,11 @@ struct ChairRandomConfig {
   std::array<double, 2> armrest_height{0.15, 0.25};
   double mass = 1000.0;  // [kg], as the authors' chair
   bool dynamic = true;
+  // Chair files (presets or .json paths, mesh chairs included) among the random chairs: of the
+  // episodes on a random chair, files_prob sit on one of these (uniformly), the rest on a
+  // generated one. Empty: generated only.
+  std::vector<std::string> files;
+  double files_prob = 0.0;
 };
 
 struct EnvConfig {
@@ -139,6 +165,7 @@ struct EnvConfig {
   InitConfig init;
   SafetyConfig safety;
   PushConfig push;
+  DomainRandomConfig randomize;
   double seat_contact_max_pelvis_z = 0.54;  // contact = pelvis touches chair AND pelvis z < this
   // The threshold follows the seat: max_pelvis_z + (seat height - the authors' 0.4029 m), so it is
   // the authors' 0.54 m on their chair and the same height above the seat on any other (ours).
@@ -155,6 +182,8 @@ struct EnvConfig {
   // Paths resolved against the source tree when relative.
   std::string HumanoidPath() const;
   std::string ChairPath() const;  // empty for "none"
+  // A chair name (preset) or .json path as ChairPath resolves env.chair.
+  static std::string ChairFilePath(const std::string& name_or_path);
   std::string QposPath() const;
 };
 
@@ -164,10 +193,13 @@ const FieldTable<EnvConfig>& EnvConfigFields();
 
 ObsLayout ObsLayoutFromName(const std::string& name, const std::string& ctx);
 std::string ObsLayoutName(ObsLayout layout);
-int ObsLayoutDim(ObsLayout layout);  // 50, 52, 57
+int ObsLayoutDim(ObsLayout layout);  // 50, 52, 57, 82
 
 // Where each block of the observation starts: more(6), joints(42), feet(2), then the layout's
-// goal(2) or chair(7). The writer, the spec's slices and the mirror map share these.
-constexpr int kObsMore = 0, kObsJoints = 6, kObsFeet = 48, kObsExtra = 50;
+// goal(2) or chair(7), then shape(25). The writer, the spec's slices and the mirror map share
+// these.
+constexpr int kObsMore = 0, kObsJoints = 6, kObsFeet = 48, kObsExtra = 50, kObsShape = 57;
+// The shape block: kChairGridSide x kChairGridSide heights (envs/chair_grid.h).
+constexpr int kChairGridSide = 5, kChairGridDim = kChairGridSide * kChairGridSide;
 
 }  // namespace perch

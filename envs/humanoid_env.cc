@@ -5,6 +5,8 @@
 #include <cmath>
 
 #include "common/npz.h"
+#include "envs/chair_grid.h"
+#include "envs/chair_random.h"
 #include "envs/spawn.h"
 
 namespace perch {
@@ -38,8 +40,13 @@ HumanoidState LoadInitPose(const EnvConfig& c, const HumanoidModel& model) {
   return StateFromQpos(a.values.data() + 51 * c.init.qpos_row);
 }
 
-// A four-legged parametric chair with sizes drawn from the config's ranges.
 Chair RandomChair(const ChairRandomConfig& c, Rng& rng) {
+  return Chair::FromJson(RandomChairJson(c, rng), "chair_random");
+}
+
+}  // namespace
+
+Json RandomChairJson(const ChairRandomConfig& c, Rng& rng, const std::string& name) {
   auto draw = [&](const std::array<double, 2>& r) { return rng.Uniform(r[0], r[1]); };
   Json p{{"seat_height", draw(c.seat_height)},
          {"seat_width", draw(c.seat_width)},
@@ -52,12 +59,8 @@ Chair RandomChair(const ChairRandomConfig& c, Rng& rng) {
   const double arm_h = draw(c.armrest_height);
   p["backrest_height"] = back ? back_h : 0.0;
   p["armrest_height"] = arms ? arm_h : 0.0;
-  return Chair::FromJson(
-      Json{{"name", "random"}, {"parametric", p}, {"mass", c.mass}, {"dynamic", c.dynamic}},
-      "chair_random");
+  return Json{{"name", name}, {"parametric", p}, {"mass", c.mass}, {"dynamic", c.dynamic}};
 }
-
-}  // namespace
 
 // ---- stand task ------------------------------------------------------------------------------
 
@@ -156,6 +159,7 @@ HumanoidChairEnv::HumanoidChairEnv(const EnvConfig& config, std::unique_ptr<Task
     : config_(config), model_(HumanoidModel::Load(config.HumanoidPath())) {
   const std::string chair_path = config_.ChairPath();
   if (!chair_path.empty()) chair_ = std::make_unique<Chair>(Chair::Load(chair_path));
+  UpdateChairGrid();
   world_ = std::make_unique<World>(model_, chair_.get(), config_.chair_placement, config_.physics);
   task_ = task ? std::move(task) : MakeTask(config_);
   init_pose_ = LoadInitPose(config_, model_);
@@ -198,11 +202,16 @@ MirrorMap BuildMirrorMap(const HumanoidModel& model, ObsLayout layout, ActionMod
   m.obs_src[kObsFeet + 1] = kObsFeet;
   if (layout == ObsLayout::kProprioGoal) {
     m.obs_scale[kObsExtra] = -1.0f;  // sin of the target's azimuth; cos unchanged
-  } else if (layout == ObsLayout::kProprioChair) {
+  } else if (layout == ObsLayout::kProprioChair || layout == ObsLayout::kProprioChairShape) {
     m.obs_scale[kObsExtra + 1] = -1.0f;  // seat target's y in the torso frame
     // Relative quaternion (x, y, z, w): a reflection maps (w, x, y, z) to (w, -x, y, -z).
     m.obs_scale[kObsExtra + 3] = -1.0f;
     m.obs_scale[kObsExtra + 5] = -1.0f;
+  }
+  if (layout == ObsLayout::kProprioChairShape) {
+    // shape(25): the chair's left and right swap (grid columns reversed).
+    for (int k = 0; k < kChairGridDim; ++k)
+      m.obs_src[kObsShape + MirroredGridIndex(k)] = kObsShape + k;
   }
   // Actions in action order: torque max_torque clip(a), or a PD target mid + a half-range.
   const int nj = model.num_joints();
@@ -253,7 +262,12 @@ void HumanoidChairEnv::BuildSpec() {
   spec_.obs_slices = {{"more", kObsMore, kObsJoints - kObsMore},
                       {"joints", kObsJoints, kObsFeet - kObsJoints},
                       {"feet", kObsFeet, kObsExtra - kObsFeet}};
-  if (layout == ObsLayout::kProprioChair) spec_.obs_slices.push_back({"chair", kObsExtra, 7});
+  if (layout == ObsLayout::kProprioChair || layout == ObsLayout::kProprioChairShape) {
+    spec_.obs_slices.push_back({"chair", kObsExtra, 7});
+  }
+  if (layout == ObsLayout::kProprioChairShape) {
+    spec_.obs_slices.push_back({"shape", kObsShape, kChairGridDim});
+  }
   if (layout == ObsLayout::kProprioGoal) spec_.obs_slices.push_back({"goal", kObsExtra, 2});
   spec_.control_dt = config_.physics.physics_dt * config_.physics.substeps;
   spec_.max_episode_steps = task_->max_episode_steps();
@@ -261,16 +275,44 @@ void HumanoidChairEnv::BuildSpec() {
   spec_.mirror = BuildMirrorMap(model_, layout, config_.action_mode);
 }
 
+void HumanoidChairEnv::UpdateChairGrid() {
+  chair_grid_.fill(0.0f);
+  if (chair_) chair_grid_ = ChairHeightGrid(*chair_, config_.obs.chair_grid_spacing);
+}
+
 void HumanoidChairEnv::Reset(float* obs) {
   // The coin is only tossed when random chairs are on, so other runs draw as before.
   if (chair_ && config_.chair_random.prob > 0) {
     if (!base_chair_) base_chair_ = std::make_unique<Chair>(*chair_);
     if (rng_.Uniform(0.0, 1.0) < config_.chair_random.prob) {
-      chair_ = std::make_unique<Chair>(RandomChair(config_.chair_random, rng_));
+      // The second coin and the file's draw only when files are given, so runs without them
+      // draw as before.
+      const auto& files = config_.chair_random.files;
+      if (!files.empty() && rng_.Uniform(0.0, 1.0) < config_.chair_random.files_prob) {
+        if (file_chairs_.empty()) {
+          for (const std::string& f : files) {
+            file_chairs_.push_back(Chair::Load(EnvConfig::ChairFilePath(f)));
+          }
+        }
+        const int k = std::min(static_cast<int>(rng_.Uniform(0.0, 1.0) * file_chairs_.size()),
+                               static_cast<int>(file_chairs_.size()) - 1);
+        chair_ = std::make_unique<Chair>(file_chairs_[k]);
+      } else {
+        chair_ = std::make_unique<Chair>(RandomChair(config_.chair_random, rng_));
+      }
     } else {
       chair_ = std::make_unique<Chair>(*base_chair_);
     }
+    UpdateChairGrid();
     world_->SetChair(chair_.get());
+  }
+  // Per-episode physics scales (env.randomize), drawn only when a range is set.
+  const DomainRandomConfig& dr = config_.randomize;
+  if (dr.friction_scale[0] != 1.0 || dr.friction_scale[1] != 1.0 || dr.mass_scale[0] != 1.0 ||
+      dr.mass_scale[1] != 1.0) {
+    const double f = rng_.Uniform(dr.friction_scale[0], dr.friction_scale[1]);
+    const double m = rng_.Uniform(dr.mass_scale[0], dr.mass_scale[1]);
+    world_->SetDynamicsScales(f, m);
   }
   HumanoidState chosen;
   if (task_->InitialState(*this, rng_, &chosen)) {
@@ -357,8 +399,10 @@ void HumanoidChairEnv::StartPush(const Eigen::Vector3d& force_n, int steps) {
 StepResult HumanoidChairEnv::Step(const float* action, float* obs) {
   UpdatePush();
   const int n = model_.num_joints();
+  const double act_noise = config_.randomize.act_noise_std;
   for (int i = 0; i < n; ++i) {
-    const float a = action[i];
+    float a = action[i];
+    if (act_noise > 0.0) a += static_cast<float>(rng_.Normal(0.0, act_noise));
     action_clipped_[i] = std::isfinite(a) ? std::clamp(a, -1.0f, 1.0f) : 0.0f;
   }
   if (config_.action_mode == ActionMode::kTorque) {
@@ -450,6 +494,11 @@ void HumanoidChairEnv::WriteObs(float* obs) {
   shown_flags_ = config_.obs.foot_contact_lag ? foot_flags_ : now;
   foot_flags_ = now;
   WriteObservation(config_.obs_layout, obs);
+  if (config_.randomize.obs_noise_std > 0.0) {
+    for (int i = 0; i < spec_.obs_dim; ++i) {
+      obs[i] += static_cast<float>(rng_.Normal(0.0, config_.randomize.obs_noise_std));
+    }
+  }
 }
 
 void HumanoidChairEnv::WriteObservation(ObsLayout layout, float* obs) const {
@@ -478,7 +527,7 @@ void HumanoidChairEnv::WriteObservation(ObsLayout layout, float* obs) const {
     const double psi = std::atan2(walk_target_.y() - b.y(), walk_target_.x() - b.x()) - yaw;
     obs[k++] = Clip(std::sin(psi), clip);
     obs[k++] = Clip(std::cos(psi), clip);
-  } else if (layout == ObsLayout::kProprioChair) {
+  } else if (layout == ObsLayout::kProprioChair || layout == ObsLayout::kProprioChairShape) {
     // chair(7): pelvis -> seat target in the torso frame; conjugate torso quaternion relative to
     // the chair frame (= world for the authors' unrotated chair), x y z w with w >= 0.
     const Eigen::Vector3d p =
@@ -492,6 +541,10 @@ void HumanoidChairEnv::WriteObservation(ObsLayout layout, float* obs) const {
     obs[k++] = Clip(rel.y(), clip);
     obs[k++] = Clip(rel.z(), clip);
     obs[k++] = Clip(rel.w(), clip);
+  }
+  if (layout == ObsLayout::kProprioChairShape) {
+    // shape(25): the chair's height grid (chair frame, fixed per chair).
+    for (int i = 0; i < kChairGridDim; ++i) obs[k++] = Clip(chair_grid_[i], clip);
   }
 }
 

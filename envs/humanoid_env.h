@@ -142,12 +142,16 @@ class HumanoidChairEnv : public Env {
   void WriteObs(float* obs);
   bool StateInvalid() const;
   void ComputePdTorques(const float* clipped_action);
-  void UpdatePush();  // env.push: ends, starts or keeps the pelvis push before a control step
+  void UpdatePush();       // env.push: ends, starts or keeps the pelvis push before a control step
+  void UpdateChairGrid();  // after chair_ changed
 
   EnvConfig config_;
   HumanoidModel model_;
   std::unique_ptr<Chair> chair_;       // this episode's
   std::unique_ptr<Chair> base_chair_;  // env.chair, when chair_random replaces it
+  std::vector<Chair> file_chairs_;     // chair_random.files, loaded at the first draw
+  // The chair's height grid (proprio_chair_shape), chair frame, relative to the seat target [m].
+  std::array<float, kChairGridDim> chair_grid_{};
   std::unique_ptr<World> world_;
   std::unique_ptr<Task> task_;
   EnvSpec spec_;

@@ -252,9 +252,22 @@ World::World(const HumanoidModel& model, const Chair* chair, const ChairPlacemen
     const Eigen::MatrixXd minv = InverseJointInertia(upright);
     const Eigen::MatrixXd c = Eigen::Map<const Eigen::VectorXd>(damping_.data(), nj).asDiagonal();
     damp_push_ = config.physics_dt * minv;
+    damp_push_unit_ = damp_push_;
     damp_solve_ = (Eigen::MatrixXd::Identity(nj, nj) + damp_push_ * c).inverse();
   }
   SetState(standing);
+}
+
+void World::SetDynamicsScales(double friction, double mass) {
+  friction_scale_ = friction;
+  if (mass != mass_scale_ && damp_push_unit_.size() > 0) {
+    // Every mass and inertia x mass: the inverse joint-space inertia / mass, exactly.
+    const int nj = model_.num_joints();
+    const Eigen::MatrixXd c = Eigen::Map<const Eigen::VectorXd>(damping_.data(), nj).asDiagonal();
+    damp_push_ = damp_push_unit_ / mass;
+    damp_solve_ = (Eigen::MatrixXd::Identity(nj, nj) + damp_push_ * c).inverse();
+  }
+  mass_scale_ = mass;
 }
 
 Eigen::MatrixXd World::InverseJointInertia(HumanoidState s) {
@@ -298,7 +311,7 @@ void World::AddFloor(Scene& sc) {
                                 : sc.Keep(new btStaticPlaneShape(btVector3(0, 0, 1), 0));
   btRigidBody::btRigidBodyConstructionInfo ci(0, nullptr, shape);
   auto* floor = new btRigidBody(ci);
-  floor->setFriction(config_.floor_friction);
+  floor->setFriction(config_.floor_friction * friction_scale_);
   floor->setUserIndex(kFloor);
   sc.objects.emplace_back(floor);
   sc.world.addRigidBody(floor);
@@ -373,7 +386,7 @@ void World::AddChair(Scene& sc, const ChairState* chair_state) {
   const double mass = dynamic ? chair_->mass : 0.0;
   btVector3 inertia = dynamic ? Bt(chair_->inertia) : btVector3(0, 0, 0);
   btRigidBody::btRigidBodyConstructionInfo ci(mass, nullptr, shape, inertia);
-  ci.m_friction = config_.chair_friction;
+  ci.m_friction = config_.chair_friction * friction_scale_;
   auto* rb = new btRigidBody(ci);
   Eigen::Isometry3d frame = placement_.Transform();
   if (chair_state) {
@@ -405,9 +418,10 @@ void World::BuildHumanoid(Scene& sc) {
   sc.body_link.assign(nb, -1);
   sc.inertial_inv.resize(nb);
   const Body& root = model_.body(0);
-  sc.body =
-      std::make_unique<btMultiBody>(model_.num_joints(), root.mass, Bt(root.principal_inertia),
-                                    /*fixedBase=*/false, /*canSleep=*/false);
+  const double ms = mass_scale_;  // env.randomize: every mass and inertia x ms
+  sc.body = std::make_unique<btMultiBody>(model_.num_joints(), root.mass * ms,
+                                          Bt(root.principal_inertia * ms),
+                                          /*fixedBase=*/false, /*canSleep=*/false);
   btMultiBody* mb = sc.body.get();
   // Link frames at q = 0 with the root at the origin; only relative frames matter here.
   const std::vector<double> zeros(model_.num_joints(), 0.0);
@@ -434,9 +448,10 @@ void World::BuildHumanoid(Scene& sc) {
                                                   parent_frame.rotation());
       const Eigen::Vector3d axis = frame.rotation().transpose() * (bw.rotation() * jt.axis);
       const double hm = model_.helper_link_mass();
-      const double mass = carrier ? b.mass : hm;
+      const double mass = (carrier ? b.mass : hm) * ms;
       const Eigen::Vector3d inertia =
-          carrier ? b.principal_inertia : Eigen::Vector3d::Constant(config_.helper_link_inertia);
+          (carrier ? b.principal_inertia : Eigen::Vector3d::Constant(config_.helper_link_inertia)) *
+          ms;
       mb->setupRevolute(link, mass, Bt(inertia), parent_link, Bt(rot_parent_to_this.normalized()),
                         Bt(axis), Bt(parent_to_pivot), Bt(pivot_to_com), true);
       mb->getLink(link).m_flags |= BT_MULTIBODYLINKFLAGS_DISABLE_ALL_PARENT_COLLISION;

@@ -170,6 +170,12 @@ class World {
   Eigen::Isometry3d ChairPlacementTransform() const { return placement_.Transform(); }
   // The seat target (seat surface centre) at the chair's placement, world [m].
   Eigen::Vector3d SeatTargetWorld() const;
+  // Per-episode physics (env.randomize), from the next SetState on: the floor's and the chair's
+  // friction x friction (so every contact of the humanoid with them), and every humanoid body's
+  // mass and inertia x mass. 1, 1: as configured.
+  void SetDynamicsScales(double friction, double mass);
+  double friction_scale() const { return friction_scale_; }
+  double mass_scale() const { return mass_scale_; }
 
   const HumanoidModel& model() const { return model_; }
   const PhysicsConfig& config() const { return config_; }
@@ -205,9 +211,11 @@ class World {
   std::unique_ptr<Scene> scene_;
   std::array<double, HumanoidModel::kNumJoints> tau_{};
   Eigen::Vector3d root_force_ = Eigen::Vector3d::Zero();
-  std::vector<double> damping_;  // [num_joints] passive damping c_j [N m s/rad]
-  Eigen::MatrixXd damp_push_;    // [nj x nj] h Minv [s/(kg m^2)]; empty: no damping
-  Eigen::MatrixXd damp_solve_;   // [nj x nj] (1 + h Minv C)^-1
+  std::vector<double> damping_;     // [num_joints] passive damping c_j [N m s/rad]
+  Eigen::MatrixXd damp_push_;       // [nj x nj] h Minv [s/(kg m^2)]; empty: no damping
+  Eigen::MatrixXd damp_solve_;      // [nj x nj] (1 + h Minv C)^-1
+  Eigen::MatrixXd damp_push_unit_;  // damp_push_ at mass scale 1
+  double friction_scale_ = 1.0, mass_scale_ = 1.0;
 };
 
 }  // namespace perch

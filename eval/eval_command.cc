@@ -278,6 +278,25 @@ void RunChain(EvalCommand& o, const RecordingWriter& write_recording) {
   }
 }
 
+// Over the chairs of a --chair all / DIR run, each weighing the same: the mean success and the
+// worst chair's (a checkpoint selected on "min_success_rate" is the one that fails no chair).
+void AddChairAggregates(const Json& table, Json* result) {
+  double sum = 0.0, worst = 1.0;
+  std::string worst_chair;
+  for (const auto& [name, r] : table.items()) {
+    const double v = r.value("success_rate", 0.0);
+    sum += v;
+    if (worst_chair.empty() || v < worst) {
+      worst = v;
+      worst_chair = name;
+    }
+  }
+  (*result)["chairs"] = static_cast<int>(table.size());
+  (*result)["success_rate"] = table.empty() ? 0.0 : sum / static_cast<double>(table.size());
+  (*result)["min_success_rate"] = worst;
+  (*result)["min_success_chair"] = worst_chair;
+}
+
 void RunSitChair(EvalCommand& o, const TaskEnvConfig& config) {
   const auto chairs = ChairSet(o.cfg.chair);
   if (!chairs.empty() && (!o.filmstrip.empty() || !o.matrix_png.empty() || !o.records.empty())) {
@@ -299,6 +318,7 @@ void RunSitChair(EvalCommand& o, const TaskEnvConfig& config) {
              {"model", o.planner ? Json("planner") : Json(ModelFile(o.model))},
              {"zone", o.chain.zone},
              {"per_chair", table}};
+    AddChairAggregates(table, &all);
     if (o.json) {
       std::cout << all.dump() << "\n";
     } else {
@@ -347,7 +367,12 @@ void RunTaskEval(EvalCommand& o, const TaskEnvConfig& config,
       if (chair_json.contains("source")) r["chair_source"] = chair_json["source"];
       table[name] = r;
     }
-    Json result{{"model", model_file}, {"task", config.env.task}, {"per_chair", table}};
+    Json result{{"model", model_file},
+                {"task", config.env.task},
+                {"per_chair", table},
+                {"episodes_per_chair", o.eval.episodes},
+                {"seed", o.eval.seed}};
+    AddChairAggregates(table, &result);
     if (o.json) {
       std::cout << result.dump() << "\n";
     } else {

@@ -145,8 +145,14 @@ std::vector<std::pair<std::string, std::string>> ChairSet(const std::string& cha
     return set;
   }
   std::error_code ec;
-  if (chair.empty() || !std::filesystem::is_directory(chair, ec)) return set;
-  for (const auto& e : std::filesystem::directory_iterator(chair)) {
+  if (chair.empty()) return set;
+  // A folder as given, else under the data root (a recipe's "data/chairs/meshes" from any cwd);
+  // a bare name is a preset, never a folder.
+  std::string dir = chair;
+  if (chair.find('/') == std::string::npos) return set;
+  if (!std::filesystem::is_directory(dir, ec)) dir = ResolveProjectPath(chair);
+  if (!std::filesystem::is_directory(dir, ec)) return set;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
     if (e.path().extension() == ".json") {
       set.push_back({e.path().stem().string(), std::filesystem::absolute(e.path()).string()});
     }

@@ -214,9 +214,8 @@ std::unique_ptr<TurnHeadingSource> TurnHeadingSource::FromSavedConfig(const Json
 }
 
 ObsLayout SubtaskPolicies::Layout(int id) const {
-  return id == kWalk || heading_[id] != nullptr ? ObsLayout::kProprioGoal
-         : id == kSit                           ? ObsLayout::kProprioChair
-                                                : ObsLayout::kProprio;
+  if (id == kSit) return sit_sees_shape_ ? ObsLayout::kProprioChairShape : ObsLayout::kProprioChair;
+  return id == kWalk || heading_[id] != nullptr ? ObsLayout::kProprioGoal : ObsLayout::kProprio;
 }
 
 SubtaskPolicies::SubtaskPolicies(const std::array<proto::ModelWeights, kNumSubtasks>& models,
@@ -230,6 +229,8 @@ SubtaskPolicies::SubtaskPolicies(const std::array<proto::ModelWeights, kNumSubta
       heading_[id] = TurnHeadingSource::FromSavedConfig(saved_configs[id], ctx);
     }
     const PolicyConfig pc = PolicyConfigFromShape(models[id].shape(), ctx);
+    // A sit trained with observe_chair_shape says so by its input count.
+    if (id == kSit) sit_sees_shape_ = pc.obs_dim == ObsLayoutDim(ObsLayout::kProprioChairShape);
     const int want = ObsLayoutDim(Layout(id));
     if (pc.kind != PolicyKind::kGaussian || pc.obs_dim != want || pc.act_dim != 21) {
       std::string why = "the " + std::string(SubtaskName(id)) +
@@ -248,7 +249,7 @@ SubtaskPolicies::SubtaskPolicies(const std::array<proto::ModelWeights, kNumSubta
     runners_[id]->set_update_obs_stats(
         false);  // frozen normalisers (notes 9.5: the cleaner choice)
   }
-  obs_.resize(57);
+  obs_.resize(ObsLayoutDim(ObsLayout::kProprioChairShape));  // the largest layout
 }
 
 void SubtaskPolicies::Begin(int id, const HumanoidChairEnv& env) {

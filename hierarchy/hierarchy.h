@@ -192,6 +192,7 @@ class SubtaskPolicies {
   std::array<std::unique_ptr<TurnHeadingSource>, kNumSubtasks> heading_;
   std::array<int, kNumSubtasks> begin_step_{};
   std::array<double, kNumSubtasks> begin_yaw_{};
+  bool sit_sees_shape_ = false;  // the sit policy observes the chair's shape (82 inputs)
   std::vector<float> obs_;
 };
 

@@ -361,8 +361,71 @@ Recipe RecipeFromJson(const Json& j, const std::string& ctx) {
   return r;
 }
 
+namespace {
+
+// A recipe file with "base": the base recipe's stages, where a stage of the same name replaces the
+// base's in place and a new one goes just before the first stage that reads it (else at the end,
+// in its order); "name" and "doc" are the variant's own.
+Json ComposedRecipeJson(const std::string& path, int depth) {
+  Json j = LoadJsonFile(path);
+  if (!j.is_object() || !j.contains("base")) return j;
+  if (depth >= 8) throw ConfigError(path + ".base: more than 8 levels of base (a cycle?)");
+  std::string rel;
+  GetRequired(j, "base", rel, path);
+  namespace fs = std::filesystem;
+  const std::string base_path = (fs::path(path).parent_path() / rel).lexically_normal().string();
+  if (!fs::exists(base_path)) {
+    throw ConfigError(path + ".base: " + base_path + " does not exist");
+  }
+  Json b = ComposedRecipeJson(base_path, depth + 1);
+  if (!b.is_object() || !b.contains("stages") || !b["stages"].is_array()) {
+    throw ConfigError(path + ".base: " + base_path + " has no list of stages");
+  }
+  if (j.contains("stages")) {
+    if (!j["stages"].is_array()) throw ConfigError(path + ".stages: expected a list of stages");
+    auto& list = b["stages"];
+    // Replacements first, so that a new stage is placed by what the replaced ones read.
+    std::vector<const Json*> added;
+    for (const Json& st : j["stages"]) {
+      bool replaced = false;
+      if (st.is_object() && st.contains("name")) {
+        for (Json& mine : list) {
+          if (mine.is_object() && mine.value("name", Json()) == st["name"]) {
+            mine = st;
+            replaced = true;
+          }
+        }
+      }
+      if (!replaced) added.push_back(&st);
+    }
+    // A new stage goes just before the first stage that reads it (a step put into the lineage),
+    // else at the end.
+    for (const Json* st : added) {
+      const std::string ref =
+          "${" + (st->is_object() ? st->value("name", std::string()) : std::string()) + ".";
+      auto at = list.end();
+      for (auto it = list.begin(); it != list.end(); ++it) {
+        if (it->dump().find(ref) != std::string::npos) {
+          at = it;
+          break;
+        }
+      }
+      list.insert(at, *st);
+    }
+  }
+  for (const char* k : {"name", "doc"}) {
+    if (j.contains(k)) b[k] = j[k];
+  }
+  for (const auto& [k, v] : j.items()) {
+    if (k != "base" && k != "stages" && k != "name" && k != "doc") b[k] = v;  // refused below
+  }
+  return b;
+}
+
+}  // namespace
+
 Recipe LoadRecipe(const std::string& path) {
-  Recipe r = RecipeFromJson(LoadJsonFile(path), path);
+  Recipe r = RecipeFromJson(ComposedRecipeJson(path, 0), path);
   r.path = path;
   return r;
 }

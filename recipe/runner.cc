@@ -308,6 +308,7 @@ class Runner {
   }
   Json ComposeConfig(const RecipeStage& scaled, bool resolve) const;
   std::string Fingerprint(const RecipeStage& s);
+  std::set<std::string> Forced() const;
   void Save();
   void Progress();
   void RunStage(const RecipeStage& s, Live* live);
@@ -482,54 +483,63 @@ void Runner::Train(const RecipeStage& s, Live* live, StageRecord* rec) {
   const std::string log = sd + "/stage.log";
   const std::string cfg_path = sd + "/config.json";
   SaveJsonFileAtomic(cfg_path, ComposeConfig(s, true));
-  const bool resume = !Checkpoints(run).empty();
   std::error_code ec;
   fs::remove(run + "/end.json", ec);
-  std::vector<std::string> argv;
-  if (f_.cluster) {
-    const std::string b = "tcp://" + f_.bind + ":";
-    argv = {exe_,
-            "learner",
-            "--config",
-            cfg_path,
-            "--run-dir",
-            run,
-            "--rollout-bind",
-            b + std::to_string(f_.rollout_port),
-            "--weights-bind",
-            b + std::to_string(f_.weights_port),
-            "--metrics-bind",
-            f_.bind,
-            "--metrics-port",
-            std::to_string(f_.metrics_port)};
-  } else {
-    argv = {exe_,        "train", "--config", cfg_path,
-            "--run-dir", run,     "--actors", std::to_string(s.actors)};
-    argv.insert(argv.end(),
-                {"--rollout-port", std::to_string(PickFreePort()), "--weights-port",
-                 std::to_string(PickFreePort()), "--metrics-port", std::to_string(PickFreePort())});
-  }
-  if (resume) argv.push_back("--resume");
-  {
-    std::lock_guard<std::mutex> g(mu_);
-    live->phase = resume ? "training (resumed from its newest checkpoint)" : "training";
-  }
+  // A local run's ports are picked afresh; one taken between the pick and the bind ("Address
+  // already in use") is picked again, a few times, rather than failing the recipe.
   int status = 0;
-  // On a cluster, local actors (if any) join the learner as remote ones do: without a config.
-  std::vector<pid_t> local;
-  if (f_.cluster) {
-    for (int i = 0; i < s.actors; ++i) {
-      local.push_back(Spawn({exe_, "actor", "--learner-host", "127.0.0.1", "--rollout-port",
-                             std::to_string(f_.rollout_port), "--weights-port",
-                             std::to_string(f_.weights_port), "--actor-id", std::to_string(i)},
-                            sd + "/actor-" + std::to_string(i) + ".log"));
+  for (int attempt = 1;; ++attempt) {
+    const bool resume = !Checkpoints(run).empty();
+    std::vector<std::string> argv;
+    if (f_.cluster) {
+      const std::string b = "tcp://" + f_.bind + ":";
+      argv = {exe_,
+              "learner",
+              "--config",
+              cfg_path,
+              "--run-dir",
+              run,
+              "--rollout-bind",
+              b + std::to_string(f_.rollout_port),
+              "--weights-bind",
+              b + std::to_string(f_.weights_port),
+              "--metrics-bind",
+              f_.bind,
+              "--metrics-port",
+              std::to_string(f_.metrics_port)};
+    } else {
+      argv = {exe_,        "train", "--config", cfg_path,
+              "--run-dir", run,     "--actors", std::to_string(s.actors)};
+      argv.insert(argv.end(), {"--rollout-port", std::to_string(PickFreePort()), "--weights-port",
+                               std::to_string(PickFreePort()), "--metrics-port",
+                               std::to_string(PickFreePort())});
     }
-  }
-  const bool ran = RunChild(argv, log, "", live, run, &status);
-  for (pid_t p : local) Stop(p, 5.0);
-  if (!ran) {
-    live->code = 130;
-    return;
+    if (resume) argv.push_back("--resume");
+    {
+      std::lock_guard<std::mutex> g(mu_);
+      live->phase = resume ? "training (resumed from its newest checkpoint)" : "training";
+    }
+    // On a cluster, local actors (if any) join the learner as remote ones do: without a config.
+    std::vector<pid_t> local;
+    if (f_.cluster) {
+      for (int i = 0; i < s.actors; ++i) {
+        local.push_back(Spawn({exe_, "actor", "--learner-host", "127.0.0.1", "--rollout-port",
+                               std::to_string(f_.rollout_port), "--weights-port",
+                               std::to_string(f_.weights_port), "--actor-id", std::to_string(i)},
+                              sd + "/actor-" + std::to_string(i) + ".log"));
+      }
+    }
+    const bool ran = RunChild(argv, log, "", live, run, &status);
+    for (pid_t p : local) Stop(p, 5.0);
+    if (!ran) {
+      live->code = 130;
+      return;
+    }
+    const bool failed = !WIFEXITED(status) || WEXITSTATUS(status) != 0;
+    if (!failed || f_.cluster || attempt >= 3 ||
+        LastLines(log, 15).find("Address already in use") == std::string::npos) {
+      break;
+    }
   }
   rec->samples = RunSamples(run);
   if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
@@ -930,10 +940,11 @@ void Runner::VerifyOutputs() {
         sha = "(missing)";
       }
       if (sha != it->second.output_sha256[name]) {
-        if (!f_.force_from.empty() && r_.Index(f_.force_from) <= r_.Index(s.name)) continue;
+        if (Forced().count(s.name)) continue;
         throw ConfigError("stage " + s.name + ": output " + name + " (" + p + ") " +
                           (sha == "(missing)" ? "is missing" : "changed since it was recorded") +
-                          "; --force-from " + s.name + " runs it (and the stages after it) again");
+                          "; --force-from " + s.name +
+                          " runs it (and the stages that read it) again");
       }
     }
   }
@@ -1003,6 +1014,16 @@ void Runner::Adopt() {
   std::cerr << "[recipe] --adopt-from " << from << ": " << adopted << " stage(s) adopted\n";
 }
 
+// --force-from S: S and the stages that read it, transitively; the stages after S that read
+// nothing of it keep what they made.
+std::set<std::string> Runner::Forced() const {
+  std::set<std::string> out;
+  if (f_.force_from.empty() || r_.Index(f_.force_from) < 0) return out;
+  out.insert(f_.force_from);
+  for (const std::string& n : StagesReading(r_, f_.force_from)) out.insert(n);
+  return out;
+}
+
 // Stages whose config, inputs or scale changed, said before anything runs.
 std::vector<std::string> Runner::AcceptChanges() {
   for (const RecipeStage& s : r_.stages) fingerprints_[s.name] = Fingerprint(s);
@@ -1018,10 +1039,10 @@ std::vector<std::string> Runner::AcceptChanges() {
     }
     changed.push_back(n);
   }
-  const int force = f_.force_from.empty() ? -1 : r_.Index(f_.force_from);
+  const std::set<std::string> forced = Forced();
   std::vector<std::string> redo;
   for (const std::string& n : changed) {
-    if (force < 0 || r_.Index(n) < force) {
+    if (!forced.count(n)) {
       std::string list;
       for (const std::string& m : changed) list += (list.empty() ? "" : ", ") + m;
       throw ConfigError("stage " + n +
@@ -1034,11 +1055,10 @@ std::vector<std::string> Runner::AcceptChanges() {
                              : ""));
     }
   }
-  if (force >= 0) {
-    for (size_t i = force; i < r_.stages.size(); ++i) {
-      auto it = state_.stages.find(r_.stages[i].name);
-      if (it != state_.stages.end() && it->second.state != "pending") redo.push_back(it->first);
-    }
+  for (const RecipeStage& s : r_.stages) {  // in the file's order
+    if (!forced.count(s.name)) continue;
+    auto it = state_.stages.find(s.name);
+    if (it != state_.stages.end() && it->second.state != "pending") redo.push_back(it->first);
   }
   if (!redo.empty() && !f_.check) {
     MoveAside(redo);

@@ -106,6 +106,10 @@ TaskDef SitDef() {
   d.name = "sit";
   d.description = "sit: from standing with the back to the chair to seated, imitating the sit clip";
   d.obs_layout = ObsLayout::kProprioChair;
+  d.layout_for = [](const TaskEnvConfig& c) {
+    return c.Section<SitTaskConfig>().observe_chair_shape ? ObsLayout::kProprioChairShape
+                                                          : ObsLayout::kProprioChair;
+  };
   d.needs_chair = true;
   d.read = [](const Json* j, const std::string& ctx, TaskEnvConfig* c) {
     c->section = std::make_shared<TaskSectionOf<SitTaskConfig>>(

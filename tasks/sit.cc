@@ -84,6 +84,8 @@ const FieldTable<SitTaskConfig>& SitTaskConfigFields() {
                Positive<double>())
           .Add("max_seat_height_m", &C::max_seat_height_m, "chairs above are refused [m]",
                Positive<double>())
+          .Add("observe_chair_shape", &C::observe_chair_shape,
+               "observe the chair's 5 x 5 height grid (env.obs_layout proprio_chair_shape)")
           .With(StartField<C>)
           .Add("start_noise_m", &C::start_noise_m, "start position noise [m]")
           .Add("start_noise_deg", &C::start_noise_deg, "start heading noise [deg]")

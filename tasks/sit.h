@@ -93,6 +93,10 @@ struct SitTaskConfig {
   // A chair whose seat is higher than this cannot be sat on from standing (the humanoid's hip
   // joints stand about 0.92 m high) [m].
   double max_seat_height_m = 0.8;
+  // Ours (false = the paper's 57-d state): also observe the chair's shape near the seat, a 5 x 5
+  // grid of its top-surface heights (env.obs_layout "proprio_chair_shape", envs/chair_grid.h),
+  // so that one sit policy can tell chairs apart (issue 51).
+  bool observe_chair_shape = false;
 
   void ApplyVariant(const std::string& variant, const std::string& ctx);
   static SitTaskConfig FromJson(const Json& j, const std::string& ctx);

@@ -381,8 +381,10 @@ void ApplyInitFrom(const LearnerSetup& setup, PpoLearner* ppo) {
     spdlog::info("learner: {}: mirrored left/right (cluster.init_mirror)", ctx);
     w = MirrorModelWeights(w, setup.mirror, ctx);
   }
-  // A meta controller that observes more (observe_active) starts from one that did not.
-  if (w.shape().kind() == "meta" && mine.kind == PolicyKind::kMeta &&
+  // A policy that observes more starts from one that did not, the new inputs with zero weights
+  // (the same function at first): a meta controller with observe_active, a sit with
+  // observe_chair_shape.
+  if (w.shape().kind() == (mine.kind == PolicyKind::kMeta ? "meta" : "gaussian") &&
       w.shape().obs_dim() < mine.obs_dim) {
     spdlog::info("learner: {}: {} inputs widened to {} (the new ones with zero weights)", ctx,
                  w.shape().obs_dim(), mine.obs_dim);

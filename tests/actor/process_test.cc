@@ -1,12 +1,16 @@
 // The launcher's restart policy (issue 17): exponential backoff, giving up on identical failures,
-// a healthy run starting the count again.
+// a healthy run starting the count again; process helpers and port picking.
 #include "actor/process.h"
 
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
 #include <signal.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
 #include <fstream>
+#include <set>
 
 namespace perch {
 namespace {
@@ -76,6 +80,33 @@ TEST(ProcessTest, LastLinesAndProcessState) {
   EXPECT_EQ(ProcessState(child), 'T');
   ::kill(child, SIGCONT);
   Stop(child, 5.0);
+}
+
+// Two recipe stages started side by side once got the same port (a pick inside the ephemeral
+// range, taken by an outgoing connection before the learner bound it): picks lie below that
+// range, are never repeated in one process, and can be bound.
+TEST(ProcessTest, PickedPortsAreDistinctBindableAndBelowTheEphemeralRange) {
+  int lo = 32768, hi = 60999;
+  {
+    std::ifstream f("/proc/sys/net/ipv4/ip_local_port_range");
+    f >> lo >> hi;
+  }
+  std::set<int> seen;
+  for (int i = 0; i < 50; ++i) {
+    const int port = PickFreePort();
+    EXPECT_TRUE(seen.insert(port).second) << "port " << port << " handed out twice";
+    EXPECT_LT(port, lo);
+    EXPECT_GE(port, 1024);
+  }
+  const int port = *seen.begin();
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  ASSERT_GE(fd, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_ANY);
+  addr.sin_port = htons(static_cast<uint16_t>(port));
+  EXPECT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)), 0);
+  ::close(fd);
 }
 
 }  // namespace

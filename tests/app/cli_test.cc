@@ -211,6 +211,9 @@ TEST_F(CliTest, MetaEvalOverEveryChairPlansOnEachChair) {
   const Json j = Json::parse(r.out);
   ASSERT_TRUE(j.contains("per_chair")) << r.out;
   EXPECT_EQ(j["per_chair"].size(), 6u);
+  EXPECT_EQ(j["chairs"], 6);
+  EXPECT_LE(j["min_success_rate"].get<double>(), j["success_rate"].get<double>());
+  EXPECT_TRUE(j["per_chair"].contains(j["min_success_chair"].get<std::string>()));
   for (const auto& [name, row] : j["per_chair"].items()) {
     EXPECT_EQ(row["chair"], name);
     EXPECT_EQ(row["trials"], 1);
@@ -565,6 +568,77 @@ TEST_F(CliTest, TrainEndsByItselfAtItsSuccessTarget) {
   EXPECT_TRUE(Has(r.out, "Run ended (target_success)")) << r.out;
   EXPECT_TRUE(Has(r.out, "over the last 4 judged episodes")) << r.out;  // the summary
   EXPECT_TRUE(std::filesystem::exists(dir + "/checkpoints")) << r.out;
+}
+
+// perch chair inspect reports what a file gives and what was found; perch chair generate writes
+// held-out chairs of a seed (the same seed the same files; never over an existing file).
+TEST_F(CliTest, ChairInspectAndGenerateWriteWhatLoads) {
+  Result r = Perch("chair inspect armchair --json", false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  Json j = Json::parse(r.out);
+  EXPECT_EQ(j["kind"], "boxes");
+  EXPECT_NEAR(j["seat_height_m"].get<double>(), 0.42, 1e-9);
+  const std::string shared = std::string(PERCH_SOURCE_DIR) + "/../shared/chairs";
+  if (std::filesystem::exists(shared)) {
+    // The sofa's deep seat: its target moved forward from the seat's centre.
+    r = Perch(std::string("chair inspect ") + PERCH_SOURCE_DIR +
+                  "/data/chairs/meshes/sofa_scenic.json --json",
+              false);
+    ASSERT_EQ(r.code, 0) << r.out;
+    j = Json::parse(r.out);
+    EXPECT_EQ(j["seat"]["source"], "found");
+    EXPECT_GT(j["seat"]["moved_forward_m"].get<double>(), 0.05);
+  }
+  const std::string dir =
+      (std::filesystem::temp_directory_path() / ("perch_gen_" + std::to_string(::getpid())))
+          .string();
+  std::filesystem::remove_all(dir);
+  r = Perch("chair generate --seed 7 --count 4 --dir " + dir + "/a --json", false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  j = Json::parse(r.out);
+  ASSERT_EQ(j["files"].size(), 4u);
+  ASSERT_EQ(Perch("chair generate --seed 7 --count 4 --dir " + dir + "/b").code, 0);
+  ASSERT_EQ(Perch("chair generate --seed 8 --count 4 --dir " + dir + "/c").code, 0);
+  auto text = [](const std::string& p) {
+    std::ifstream f(p);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+  };
+  int differ = 0;
+  for (int k = 0; k < 4; ++k) {
+    const std::string name = "/gen_7_" + std::to_string(k) + ".json";
+    EXPECT_EQ(text(dir + "/a" + name), text(dir + "/b" + name));
+    differ += text(dir + "/a" + name) != text(dir + "/c/gen_8_" + std::to_string(k) + ".json");
+    // Each file is a chair the eval loads.
+    r = Perch("chair inspect " + dir + "/a" + name + " --json", false);
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_GE(Json::parse(r.out)["seat_height_m"].get<double>(), 0.33 - 1e-9);
+  }
+  EXPECT_GT(differ, 0);
+  // perch eval --chair DIR: one row per generated chair, their mean and their worst.
+  r = Perch("eval --task sit --model " + std::string(PERCH_SOURCE_DIR) +
+                "/models/sit/policy.bin --episodes 2 --seed 3 --json --chair " + dir + "/a",
+            false);
+  ASSERT_EQ(r.code, 0) << r.out;
+  j = Json::parse(r.out);
+  ASSERT_EQ(j["per_chair"].size(), 4u) << r.out;
+  double sum = 0.0, worst = 1.0;
+  for (const auto& [name, row] : j["per_chair"].items()) {
+    EXPECT_EQ(row["episodes"], 2) << name;
+    sum += row["success_rate"].get<double>();
+    worst = std::min(worst, row["success_rate"].get<double>());
+  }
+  EXPECT_EQ(j["chairs"], 4);
+  EXPECT_NEAR(j["success_rate"].get<double>(), sum / 4, 1e-12);
+  EXPECT_EQ(j["min_success_rate"].get<double>(), worst);
+  EXPECT_EQ(j["per_chair"][j["min_success_chair"].get<std::string>()]["success_rate"].get<double>(),
+            worst);
+  // A second run into the same folder is refused by name and leaves the files as they were.
+  const std::string before = text(dir + "/a/gen_7_0.json");
+  r = Perch("chair generate --seed 7 --count 4 --dir " + dir + "/a");
+  EXPECT_NE(r.code, 0);
+  EXPECT_TRUE(Has(r.out, "gen_7_0.json: exists")) << r.out;
+  EXPECT_EQ(text(dir + "/a/gen_7_0.json"), before);
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -126,14 +126,63 @@ TEST_F(ChairMeshTest, FindsTheSeatAndFacingOfABoxChairWrittenAsAnObj) {
       EXPECT_NEAR(c.seat_height(), boxes.seat_height() - LowestZ(boxes), 1e-4);
       EXPECT_NEAR(std::remainder(c.mesh->info.facing_deg - yaw_deg, 360.0), 0.0, 1.0);
       EXPECT_FALSE(c.dynamic);
-      // The seat in file coordinates is the box seat's top centre carried through the transform.
-      Eigen::Vector3d want =
-          (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * boxes.seat_target + offset) / 0.01;
+      // The seat in file coordinates is the box seat's top centre carried through the transform,
+      // moved forward where the seat is deeper in front of it than max_front_depth (the
+      // armchair's front edge is 0.225 m ahead of its centre).
+      double front = 0.0;
+      for (const ChairBox& b : boxes.boxes) {
+        if (b.role == "seat") front = b.max.x() - boxes.seat_target.x();
+      }
+      const double shift = std::max(0.0, front - SeatFinderConfig().max_front_depth);
+      EXPECT_NEAR(c.mesh->info.seat_moved_forward_m, shift, 1e-4);
+      Eigen::Vector3d want = (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *
+                                  (boxes.seat_target + Eigen::Vector3d(shift, 0, 0)) +
+                              offset) /
+                             0.01;
       if (y_up) want = Eigen::Vector3d(want.x(), want.z(), -want.y());
       EXPECT_LT((c.mesh->info.seat_file - want).norm(), 0.5) << c.mesh->info.seat_file.transpose();
-      // Back in the chair frame the mesh is the box chair again.
-      EXPECT_LT((c.mesh->visual.Bounds().min() - Eigen::Vector3d(-0.305, -0.31, 0)).norm(), 1e-4);
-      EXPECT_NEAR(*c.backrest_front_x(), *boxes.backrest_front_x(), 0.005);
+      // Back in the chair frame the mesh is the box chair again (shifted with its target).
+      EXPECT_LT((c.mesh->visual.Bounds().min() - Eigen::Vector3d(-0.305 - shift, -0.31, 0)).norm(),
+                1e-4);
+      EXPECT_NEAR(*c.backrest_front_x(), *boxes.backrest_front_x() - shift, 0.005);
+    }
+  }
+}
+
+// A deep seat (a sofa's) is sat on near its front, not at its centre: the found target moves to
+// max_front_depth behind the seat's front edge; a seat shallower than that keeps its centre.
+TEST_F(ChairMeshTest, ADeepSeatsTargetLiesNearItsFrontEdge) {
+  const SeatFinderConfig finder;
+  for (const double depth : {0.45, 0.7}) {
+    SCOPED_TRACE(depth);
+    const Chair boxes = Chair::FromJson(Json{{"name", "deep"},
+                                             {"parametric",
+                                              {{"seat_height", 0.45},
+                                               {"seat_width", 0.5},
+                                               {"seat_depth", depth},
+                                               {"seat_thickness", 0.08},
+                                               {"leg_size", 0.05},
+                                               {"backrest_height", 0.4},
+                                               {"backrest_thickness", 0.08}}}},
+                                        "deep");
+    double front = -1e9;  // the seat box's front face, box chair frame
+    for (const ChairBox& b : boxes.boxes) {
+      if (b.role == "seat") front = b.max.x();
+    }
+    const double centre_depth = front - boxes.seat_target.x();
+    Write("c.obj", BoxesAsObj(boxes, 0.4, Eigen::Vector3d(1.0, 2.0, 0.0), 1.0, false));
+    const Chair c = Chair::Load(WriteJson("c.json", {{"name", "c"}, {"mesh", "c.obj"}}));
+    // The seat's front edge in the mesh chair's frame (+x forward, origin under the target).
+    double mesh_front = -1e9;
+    for (const Eigen::Vector3d& v : c.mesh->visual.vertices) {
+      if (std::abs(v.z() - c.seat_height()) < 1e-6) mesh_front = std::max(mesh_front, v.x());
+    }
+    if (centre_depth > finder.max_front_depth) {
+      EXPECT_NEAR(mesh_front, finder.max_front_depth, 2e-5);
+      EXPECT_NEAR(c.mesh->info.seat_moved_forward_m, centre_depth - finder.max_front_depth, 2e-5);
+    } else {
+      EXPECT_NEAR(mesh_front, centre_depth, 2e-5);
+      EXPECT_EQ(c.mesh->info.seat_moved_forward_m, 0.0);
     }
   }
 }

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <map>
+#include <set>
 
 #include "common/npz.h"
 #include "common/rng.h"
@@ -162,7 +164,8 @@ TEST(HumanoidEnv, FootContactFlagsStandingAndLifted) {
 // rotated about the vertical axis and shifted gives the same observation.
 TEST(HumanoidEnv, ObservationInvariantToHorizontalSceneTransform) {
   const double yaw = 1.1, dx = 3.0, dy = -2.0;
-  for (ObsLayout layout : {ObsLayout::kProprioGoal, ObsLayout::kProprioChair}) {
+  for (ObsLayout layout :
+       {ObsLayout::kProprioGoal, ObsLayout::kProprioChair, ObsLayout::kProprioChairShape}) {
     EnvConfig a = PdConfig();
     a.obs_layout = layout;
     a.obs.foot_contact_lag = false;
@@ -758,6 +761,149 @@ TEST(HumanoidEnv, RandomChairsPerEpisodeWithinTheirRangesAndTheSeatTargetFollows
   HumanoidChairEnv fixed(c);
   fixed.Reset(obs.data());
   EXPECT_NEAR(fixed.chair()->seat_height(), 0.4029, 1e-9);
+}
+
+std::string EnvConfigError(const Json& j);
+
+// chair_random.files: of the random chairs, files_prob come from the listed files (each drawn),
+// the rest generated; the world and the seat target follow whichever it is.
+TEST(HumanoidEnv, RandomChairsDrawTheListedFilesAsWellAsGeneratedOnes) {
+  EnvConfig c;
+  c.chair = "authors";
+  c.chair_random.prob = 1.0;
+  c.chair_random.files = {"stool", "bench"};
+  c.chair_random.files_prob = 0.6;
+  HumanoidChairEnv env(c);
+  std::vector<float> obs(env.spec().obs_dim);
+  std::map<std::string, int> seen;
+  for (int seed = 0; seed < 30; ++seed) {
+    env.Seed(seed);
+    env.Reset(obs.data());
+    ASSERT_NE(env.chair(), nullptr);
+    EXPECT_EQ(env.world().chair(), env.chair());
+    ++seen[env.chair()->name];
+    if (env.chair()->name == "stool") {
+      EXPECT_NEAR(env.SeatTargetWorld().z(),
+                  Chair::Load(Chair::PresetPath("stool")).seat_target.z(), 1e-9);
+    }
+  }
+  EXPECT_GT(seen["stool"], 0);
+  EXPECT_GT(seen["bench"], 0);
+  EXPECT_GT(seen["random"], 0);
+  EXPECT_EQ(seen.size(), 3u);
+  EXPECT_NE(EnvConfigError({{"chair_random", {{"files_prob", 0.5}}}}).find("files_prob"),
+            std::string::npos);
+}
+
+// env.randomize (issue 49): per-episode mass and friction scales change the physics as they
+// should; observation noise changes what the policy sees and nothing of the state; action noise
+// changes the motion, reproducibly for a seed.
+TEST(HumanoidEnv, RandomizedPhysicsAndNoisesChangeWhatTheyShould) {
+  const EnvConfig base = PdConfig();
+  // Held by the same PD targets for 1 s: a heavier humanoid sags lower.
+  auto settle = [](const EnvConfig& c, double* scale) {
+    HumanoidChairEnv env(c);
+    std::vector<float> obs(env.spec().obs_dim), act(21);
+    env.Seed(1);
+    env.Reset(obs.data());
+    *scale = env.world().mass_scale();
+    HumanoidState s = StandingPose(env.model(), 0.002);
+    s.root_pos.x() = 2.0;
+    env.ResetToState(s, obs.data());
+    env.HoldPoseAction(s.q.data(), act.data());
+    for (int t = 0; t < 60; ++t) env.Step(act.data(), obs.data());
+    return env.humanoid_state().root_pos.z();
+  };
+  EnvConfig heavy = base;
+  heavy.randomize.mass_scale = {1.6, 1.6};
+  double m1 = 0, m2 = 0;
+  const double z1 = settle(base, &m1), z2 = settle(heavy, &m2);
+  EXPECT_EQ(m1, 1.0);
+  EXPECT_NEAR(m2, 1.6, 1e-12);
+  EXPECT_LT(z2, z1 - 1e-3) << "light " << z1 << " heavy " << z2;
+  // The same push that topples it slides its foot further on a slippery floor (measured 0.07 m
+  // against 0.14 m).
+  auto slide = [](const EnvConfig& c) {
+    HumanoidChairEnv env(c);
+    std::vector<float> obs(env.spec().obs_dim), act(21);
+    env.Seed(1);
+    env.Reset(obs.data());
+    HumanoidState s = StandingPose(env.model(), 0.002);
+    s.root_pos.x() = 2.0;
+    env.ResetToState(s, obs.data());
+    env.HoldPoseAction(s.q.data(), act.data());
+    for (int t = 0; t < 10; ++t) env.Step(act.data(), obs.data());
+    // The feet: on a grippy floor they stay where they stood while the body sways.
+    const int foot = env.model().foot_bodies()[0];
+    const Eigen::Vector2d before = env.BodyPosition(foot).head<2>();
+    env.StartPush(Eigen::Vector3d(0, 150.0, 0), 30);  // 0.5 s: it falls either way
+    for (int t = 0; t < 30; ++t) env.Step(act.data(), obs.data());
+    return (env.BodyPosition(foot).head<2>() - before).norm();
+  };
+  EnvConfig slippery = base;
+  slippery.randomize.friction_scale = {0.1, 0.1};
+  const double d1 = slide(base), d2 = slide(slippery);
+  EXPECT_GT(d2, 1.5 * d1) << "grippy " << d1 << " slippery " << d2;
+  // A range draws per episode, within it.
+  EnvConfig ranged = base;
+  ranged.randomize.friction_scale = {0.5, 1.5};
+  ranged.randomize.mass_scale = {0.8, 1.2};
+  {
+    HumanoidChairEnv env(ranged);
+    std::vector<float> obs(env.spec().obs_dim);
+    std::set<double> seen;
+    for (int e = 0; e < 5; ++e) {
+      env.Reset(obs.data());
+      EXPECT_GE(env.world().friction_scale(), 0.5);
+      EXPECT_LE(env.world().friction_scale(), 1.5);
+      EXPECT_GE(env.world().mass_scale(), 0.8);
+      EXPECT_LE(env.world().mass_scale(), 1.2);
+      seen.insert(env.world().mass_scale());
+    }
+    EXPECT_EQ(seen.size(), 5u);
+  }
+  // Observation noise: the same states, observations off by about the noise.
+  auto run = [](const EnvConfig& c, std::vector<float>* obs_out, HumanoidState* st) {
+    HumanoidChairEnv env(c);
+    std::vector<float> obs(env.spec().obs_dim), act(21, 0.05f);
+    env.Seed(4);
+    env.Reset(obs.data());
+    for (int t = 0; t < 10; ++t) env.Step(act.data(), obs.data());
+    *obs_out = obs;
+    *st = env.humanoid_state();
+  };
+  EnvConfig noisy = base;
+  noisy.randomize.obs_noise_std = 0.05;
+  std::vector<float> o0, o1;
+  HumanoidState s0, s1;
+  run(base, &o0, &s0);
+  run(noisy, &o1, &s1);
+  EXPECT_EQ(s0.root_pos, s1.root_pos);
+  EXPECT_EQ(s0.q, s1.q);
+  double mad = 0.0;
+  for (size_t i = 0; i < o0.size(); ++i) mad += std::abs(o1[i] - o0[i]);
+  mad /= static_cast<double>(o0.size());
+  EXPECT_GT(mad, 0.5 * 0.05);  // E|N(0, s)| = 0.8 s
+  EXPECT_LT(mad, 1.2 * 0.05);
+  // Action noise: another motion, the same one for the same seed.
+  EnvConfig shaky = base;
+  shaky.randomize.act_noise_std = 0.3;
+  std::vector<float> o2, o3;
+  HumanoidState s2, s3;
+  run(shaky, &o2, &s2);
+  run(shaky, &o3, &s3);
+  EXPECT_EQ(o2, o3);
+  EXPECT_GT(
+      (s2.root_pos - s0.root_pos).norm() + (Eigen::Map<const Eigen::VectorXd>(s2.q.data(), 21) -
+                                            Eigen::Map<const Eigen::VectorXd>(s0.q.data(), 21))
+                                               .norm(),
+      1e-3);
+  // Bad ranges are refused naming the field.
+  EXPECT_NE(
+      EnvConfigError({{"randomize", {{"mass_scale", {1.2, 0.8}}}}}).find("randomize.mass_scale"),
+      std::string::npos);
+  EXPECT_NE(EnvConfigError({{"randomize", {{"obs_noise_std", -1.0}}}}).find("obs_noise_std"),
+            std::string::npos);
 }
 
 TEST(HumanoidEnv, SeatContactHeightFollowsTheSeatUnlessAbsolute) {

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "learner/ppo.h"
+#include "policy/policy.h"
 #include "tests/support/untrained.h"
 
 namespace perch {
@@ -132,6 +133,35 @@ TEST(Hierarchy, SubtaskPoliciesRefuseAModelOfAnotherObservationByName) {
     EXPECT_NE(m.find("sit policy sit.bin"), std::string::npos) << m;
     EXPECT_NE(m.find("57"), std::string::npos) << m;
   }
+}
+
+// A sit trained with observe_chair_shape (82 inputs) is run on the 57-d state plus the chair's
+// height grid; a 57-input sit keeps the paper's state.
+TEST(Hierarchy, ASitThatSeesTheChairsShapeIsGivenItsHeightGrid) {
+  auto models = UntrainedSet();
+  EXPECT_EQ(SubtaskPolicies(models, {"l", "r", "s", "w"}).Layout(kSit), ObsLayout::kProprioChair);
+  models[kSit] = Untrained(82, 9);
+  SubtaskPolicies p(models, {"l", "r", "s", "w"});
+  EXPECT_EQ(p.Layout(kSit), ObsLayout::kProprioChairShape);
+  auto env = MakeTaskHumanoidEnv(SitChair(1));
+  std::vector<float> obs(57), shape_obs(82), a(21), b(21);
+  env->Seed(4);
+  env->Reset(obs.data());
+  Rng r1(2), r2(2);
+  p.Act(kSit, *env, r1, true, a.data());
+  PolicyRunner direct(PolicyConfigFromShape(models[kSit].shape(), "s"), NormalizerConfig());
+  direct.LoadWeights(models[kSit]);
+  direct.set_update_obs_stats(false);
+  env->WriteObservation(ObsLayout::kProprioChairShape, shape_obs.data());
+  direct.Act(shape_obs.data(), r2, true, nullptr, b.data());
+  for (int i = 0; i < 21; ++i) EXPECT_EQ(a[i], b[i]) << i;
+  // The grid is what the policy saw: another grid gives another action.
+  for (int k = 0; k < kChairGridDim; ++k) shape_obs[kObsShape + k] += 0.5f;
+  Rng r3(2);
+  direct.Act(shape_obs.data(), r3, true, nullptr, b.data());
+  int differ = 0;
+  for (int i = 0; i < 21; ++i) differ += a[i] != b[i];
+  EXPECT_GT(differ, 0);
 }
 
 TEST(Hierarchy, ScriptedChainIsReproducibleAndUntrainedSubtasksNeverSit) {

@@ -387,6 +387,32 @@ TEST(AppendZeroInputs, ActsAsTheSourceWhateverTheNewInputsHold) {
   EXPECT_THROW(AppendZeroInputs(w, 40, "t"), ConfigError);
 }
 
+// The sit that observes the chair's shape (57 + 25 inputs) starts from a trained 57-input sit:
+// the same torques and value whatever the grid holds.
+TEST(AppendZeroInputs, AGaussianSubtaskActsAsTheSourceWhateverTheNewInputsHold) {
+  Rng rng(9);
+  const proto::ModelWeights w =
+      RandomizedWeights(PolicyConfig::Subtask(57), PpoConfig::Subtask(), 14, 50.0, rng);
+  const proto::ModelWeights wide = AppendZeroInputs(w, 82, "test");
+  EXPECT_EQ(wide.shape().obs_dim(), 82);
+  EXPECT_EQ(wide.shape().kind(), "gaussian");
+  PolicyRunner src(PolicyConfigFromShape(w.shape(), "w"), NormalizerConfig());
+  PolicyRunner dst(PolicyConfigFromShape(wide.shape(), "d"), NormalizerConfig());
+  src.LoadWeights(w);
+  dst.LoadWeights(wide);
+  src.set_update_obs_stats(false);
+  dst.set_update_obs_stats(false);
+  const int k = PolicyConfigFromShape(w.shape(), "w").act_dim;
+  for (int trial = 0; trial < 5; ++trial) {
+    std::vector<float> x(82), a(k), b(k);
+    for (float& v : x) v = static_cast<float>(rng.Normal() * 2.0);
+    const auto os = src.Act(x.data(), rng, true, nullptr, a.data());
+    const auto od = dst.Act(x.data(), rng, true, nullptr, b.data());
+    for (int i = 0; i < k; ++i) EXPECT_NEAR(a[i], b[i], 1e-5) << i;
+    EXPECT_NEAR(os.value, od.value, 1e-5);
+  }
+}
+
 }  // namespace
 }  // namespace perch
 

@@ -4,6 +4,7 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -268,21 +269,94 @@ TEST(Recipe, StateFileRoundTripsAndRefusesCorruption) {
 // a stop rule and names how its checkpoint is chosen.
 TEST(Recipe, DeliveredRecipeIsValidAndSelfContained) {
   const std::string path = std::string(PERCH_SOURCE_DIR) + "/recipes/sit_chair.json";
-  const Recipe r = LoadRecipe(path);
-  EXPECT_GE(r.stages.size(), 10u);
-  for (const RecipeStage& s : r.stages) {
-    for (const std::string& str : s.sets)
-      EXPECT_EQ(str.find("models/"), std::string::npos) << s.name << ": " << str;
-    for (const std::string& str : s.args)
-      EXPECT_EQ(str.find("models/"), std::string::npos) << s.name << ": " << str;
-    if (s.kind == "train") {
-      EXPECT_GT(s.max_samples, 0) << s.name;
-      EXPECT_TRUE(fs::exists(std::string(PERCH_SOURCE_DIR) + "/" + s.config)) << s.config;
+  const Recipe main = LoadRecipe(path);
+  EXPECT_GE(main.stages.size(), 10u);
+  // Its variant for many chairs (issue 51): every stage of the main recipe, then its own.
+  const Recipe chairs =
+      LoadRecipe(std::string(PERCH_SOURCE_DIR) + "/recipes/sit_chair_many_chairs.json");
+  ASSERT_GT(chairs.stages.size(), main.stages.size());
+  for (size_t i = 0; i < main.stages.size(); ++i) {
+    EXPECT_EQ(chairs.stages[i].name, main.stages[i].name);
+  }
+  EXPECT_THAT(StagesReading(chairs, "sit"), testing::Contains("eval_sit_chairs_heldout"));
+  for (const Recipe& r : {main, chairs}) {
+    for (const RecipeStage& s : r.stages) {
+      for (const std::string& str : s.sets)
+        EXPECT_EQ(str.find("models/"), std::string::npos) << s.name << ": " << str;
+      for (const std::string& str : s.args)
+        EXPECT_EQ(str.find("models/"), std::string::npos) << s.name << ": " << str;
+      if (s.kind == "train") {
+        EXPECT_GT(s.max_samples, 0) << s.name;
+        EXPECT_TRUE(fs::exists(std::string(PERCH_SOURCE_DIR) + "/" + s.config)) << s.config;
+      }
+      // A folder of chairs an evaluation reads is in the tree.
+      for (size_t k = 0; k + 1 < s.args.size(); ++k) {
+        if (s.args[k] == "--chair" && s.args[k + 1] != "all") {
+          EXPECT_TRUE(fs::is_directory(std::string(PERCH_SOURCE_DIR) + "/" + s.args[k + 1]))
+              << s.name << ": " << s.args[k + 1];
+        }
+      }
     }
   }
 }
 
 // The readers of a stage, through other stages too; a stage that reads nothing of it is not one.
+// A variant names a base recipe: its stages of the same name replace the base's in place, new
+// ones follow; a missing base or an unknown key is refused by name.
+TEST(Recipe, AVariantReplacesAndAppendsStagesOfItsBase) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("perch_recipe_base_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir / "v");
+  std::ofstream(dir / "base.json") << ThreeStages().dump();
+  Json bank = Stage("bank", "sample");
+  bank["args"] = {"--model", "${walk.policy}", "--out", "${out.bank}"};
+  bank["counts"] = {{"--count", 99}};
+  Json extra = Stage("eval2", "eval");
+  extra["args"] = {"--model", "${turn.policy}"};
+  std::ofstream(dir / "v" / "variant.json")
+      << Json{{"base", "../base.json"}, {"name", "v"}, {"stages", {bank, extra}}}.dump();
+  const Recipe r = LoadRecipe((dir / "v" / "variant.json").string());
+  EXPECT_EQ(r.name, "v");
+  ASSERT_EQ(r.stages.size(), 5u);
+  EXPECT_EQ(r.stages[1].name, "bank");
+  EXPECT_EQ(r.stages[1].counts.at("--count"), 99);  // replaced in place
+  EXPECT_EQ(r.stages[4].name, "eval2");
+  EXPECT_THAT(StagesReading(r, "walk"), testing::Contains("eval2"));
+  // A step put into the lineage: a new stage that a replaced one reads goes just before it.
+  Json pre = Stage("pre", "train");
+  pre["set"] = {{"cluster.init_from", "${walk.policy}"}};
+  Json turn = Stage("turn", "train");
+  turn["set"] = {{"cluster.init_from", "${pre.policy}"}};
+  std::ofstream(dir / "v" / "step.json")
+      << Json{{"base", "../base.json"}, {"name", "s"}, {"stages", {pre, turn}}}.dump();
+  const Recipe step = LoadRecipe((dir / "v" / "step.json").string());
+  std::vector<std::string> order;
+  for (const RecipeStage& st : step.stages) order.push_back(st.name);
+  EXPECT_THAT(order, testing::ElementsAre("walk", "bank", "pre", "turn", "eval"));
+  EXPECT_THAT(StagesReading(step, "pre"), testing::ElementsAre("turn", "eval"));
+  // A variant of a variant.
+  std::ofstream(dir / "v" / "v2.json")
+      << Json{{"base", "variant.json"}, {"name", "v2"}, {"stages", Json::array()}}.dump();
+  EXPECT_EQ(LoadRecipe((dir / "v" / "v2.json").string()).stages.size(), 5u);
+  std::ofstream(dir / "v" / "bad.json") << Json{{"base", "nope.json"}, {"name", "b"}}.dump();
+  try {
+    LoadRecipe((dir / "v" / "bad.json").string());
+    ADD_FAILURE() << "a missing base was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("nope.json does not exist"), std::string::npos)
+        << e.what();
+  }
+  std::ofstream(dir / "v" / "odd.json")
+      << Json{{"base", "variant.json"}, {"name", "o"}, {"stagez", Json::array()}}.dump();
+  try {
+    LoadRecipe((dir / "v" / "odd.json").string());
+    ADD_FAILURE() << "an unknown key was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("stagez"), std::string::npos) << e.what();
+  }
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Recipe, StagesReadingFollowsReadersTransitively) {
   const Recipe r = RecipeFromJson(ThreeStages(), "r.json");
   EXPECT_THAT(StagesReading(r, "walk"), testing::ElementsAre("bank", "turn", "eval"));

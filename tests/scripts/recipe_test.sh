@@ -261,7 +261,7 @@ for st in ("eval_meta_zone1", "eval_meta_zone2", "eval_meta_zone3"):
     for s in plan["shards"]:
         assert os.path.exists(s["result"]), s
 PY
-# --force-from redoes that stage (and only what follows it), moving its old files aside. Here
+# --force-from redoes that stage (and only the stages that read it), moving its old files aside. Here
 # its shards are taken only by a worker in another process (--local-shards 0), as a worker pod
 # sharing the directory would (k8s/recipe-eval-workers.yaml).
 "$bin" recipe worker --dir "$B" --exit-when-idle-s 20 > "$tmp/worker.log" 2>&1 &
@@ -270,6 +270,12 @@ worker=$!
   --force-from eval_meta_zone3 > "$tmp/f.log" 2>&1 || fail "--force-from: $(tail -20 "$tmp/f.log")"
 wait $worker || fail "the worker failed: $(tail -20 "$tmp/worker.log")"
 ls "$B"/superseded/*/eval_meta_zone3/eval.json > /dev/null || fail "the old files were not kept"
+# Later stages that read nothing of eval_meta_zone3 kept what they made.
+for later in eval_meta_zone1_lookahead paper_meta_walk; do
+  if ls -d "$B"/superseded/*/$later > /dev/null 2>&1; then
+    fail "--force-from eval_meta_zone3 redid $later, which does not read it"
+  fi
+done
 python3 - "$B" "$worker" "$tmp/keep.json" << 'PY' || fail "worker shards: $(cat "$tmp/worker.log")"
 import json, os, sys
 d, worker, before = sys.argv[1], sys.argv[2], sys.argv[3]
