@@ -23,8 +23,8 @@ void RegisterRecipeRun(CLI::App* recipe) {
   run->add_option("--from", f->from, "first stage to run (earlier ones must be done)");
   run->add_option("--until", f->until, "last stage to run");
   run->add_option("--force-from", f->force_from,
-                  "redo this stage and every later one that ran (their files move to "
-                  "DIR/superseded/): accepts a changed stage");
+                  "redo this stage and the stages that read it, transitively (their files move "
+                  "to DIR/superseded/): accepts a changed stage");
   run->add_option("--extend", f->extend,
                   "accept a training stage's larger budget (cluster.max_samples; learning rates "
                   "past the samples it trained may change too): it continues from its newest "

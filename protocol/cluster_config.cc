@@ -70,6 +70,8 @@ const FieldTable<ClusterConfig>& ClusterConfigFields() {
           .Add("init_from", &C::init_from,
                "a new run starts from this checkpoint's policy and normalizer (empty: scratch)")
           .Add("init_mirror", &C::init_mirror, "init_from is the mirror-image task's policy")
+          .Add("init_state", &C::init_state,
+               "init_from also carries Adam, reward scaling and the PPO RNG (a branch)")
           .Add("max_samples", &C::max_samples, "the run ends after this many samples (0: none)",
                Satisfies<int64_t>([](const int64_t& v) { return v >= 0; },
                                   "must be >= 0 (0: no budget)"))

@@ -49,6 +49,11 @@ struct ClusterConfig {
   // through the env's spec (EnvSpec::mirror, MirrorModelWeights), e.g. a right turn that starts
   // as the left turn's mirror image.
   bool init_mirror = false;
+  // init_from also carries the source's trainer state (ours): Adam's moments, the reward scaler,
+  // the observation normaliser's statistics and the PPO RNG, as a branch of that run resumed with
+  // a new config (the delivered walker's fall-restart stretch was made so). The counters still
+  // start at 0, so budgets and schedules count this run's own samples. Needs the same network.
+  bool init_state = false;
   // A run ends by itself (final checkpoint, summary) once trained on max_samples env steps (0: no
   // budget; the console then shows percent done and an ETA), or once the success rate over the
   // newest target_window judged episodes reaches target_success (0: no target; tasks with a

@@ -363,6 +363,29 @@ void ApplyInitFrom(const LearnerSetup& setup, PpoLearner* ppo) {
   if (!c.has_trainer() || !c.trainer().has_model()) {
     throw ConfigError(ctx + ": holds no trained policy");
   }
+  if (setup.cluster.init_state) {
+    // A branch of the source run under a new config: its whole trainer state, counters at 0.
+    if (setup.cluster.init_mirror) {
+      throw ConfigError(ctx +
+                        ": cluster.init_state takes the source's trainer state as it is; "
+                        "not with cluster.init_mirror");
+    }
+    proto::LearnerState st = c.trainer();
+    st.mutable_model()->set_version(0);
+    st.set_num_updates(0);
+    st.set_num_samples(0);
+    try {
+      ppo->ImportState(st, ctx);
+    } catch (const ConfigError& e) {
+      throw ConfigError(std::string(e.what()) +
+                        " (cluster.init_state needs the source's network and observation)");
+    }
+    spdlog::info(
+        "learner: new run initialised from {} with its trainer state (Adam, reward "
+        "scaling, normaliser; cluster.init_state)",
+        path);
+    return;
+  }
   // Weights and normalizer only; the new run counts its own updates from 0.
   proto::ModelWeights w = c.trainer().model();
   w.set_version(0);

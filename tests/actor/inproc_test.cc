@@ -310,6 +310,48 @@ TEST(InprocTest, NewRunStartsFromInitFromCheckpointWeights) {
   }
 }
 
+// cluster.init_state: a new run takes the source's whole trainer state (Adam, reward scaling,
+// normaliser, RNG) with its counters at 0; without it only the weights and normaliser.
+TEST(InprocTest, InitStateCarriesTheSourcesTrainerStateWithCountersAtZero) {
+  std::string src_dir;
+  ASSERT_EQ(RunInproc("state-src", 2, 1, &src_dir).learner_updates, 2u);
+  const std::string src_ckpt = src_dir + "/checkpoints/ckpt-0000000002.bin";
+  const proto::LearnerState a = ReadCheckpointFile(src_ckpt).trainer();
+  ASSERT_GT(a.adam().step(), 0);
+  zmq::context_t ctx(1);
+  auto start = [&](bool state, const std::string& name) {
+    Json j = MockConfig(Json{{"init_from", src_ckpt}, {"init_state", state}});
+    LearnerService learner(ctx, MakeLearnerSetup(ExperimentConfigFromJson(j, name)),
+                           InprocOptions(name, TempDir(name) + "/run"));
+    return ReadCheckpointFile(learner.SaveCheckpoint());
+  };
+  const proto::Checkpoint with = start(true, "state-with");
+  const proto::Checkpoint without = start(false, "state-without");
+  EXPECT_EQ(with.trainer().adam().step(), a.adam().step());
+  ASSERT_EQ(with.trainer().adam().m_size(), a.adam().m_size());
+  for (int i = 0; i < a.adam().m_size(); i += 97) {
+    EXPECT_EQ(with.trainer().adam().m(i), a.adam().m(i)) << i;
+  }
+  EXPECT_EQ(with.trainer().return_stats().count(), a.return_stats().count());
+  EXPECT_EQ(with.trainer().num_updates(), 0);
+  EXPECT_EQ(with.trainer().num_samples(), 0);
+  EXPECT_EQ(with.counters().updates(), 0u);
+  for (int i = 0; i < a.model().params_size(); i += 97) {
+    EXPECT_EQ(with.trainer().model().params(i), a.model().params(i)) << i;
+  }
+  EXPECT_EQ(without.trainer().adam().step(), 0);
+  EXPECT_NE(without.trainer().return_stats().count(), a.return_stats().count());
+  // Not with a mirror: the state is taken as it is.
+  Json j = MockConfig(Json{{"init_from", src_ckpt}, {"init_state", true}, {"init_mirror", true}});
+  try {
+    LearnerService learner(ctx, MakeLearnerSetup(ExperimentConfigFromJson(j, "state-mirror")),
+                           InprocOptions("state-mirror", TempDir("state-mirror") + "/run"));
+    ADD_FAILURE() << "init_state with init_mirror was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("init_state"), std::string::npos) << e.what();
+  }
+}
+
 // A run configured with wider hidden layers starts from another run's policy widened
 // (Net2WiderNet: the same function, more units); a narrower one is refused by name.
 TEST(InprocTest, InitFromIntoWiderLayersKeepsThePolicy) {
