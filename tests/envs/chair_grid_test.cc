@@ -12,6 +12,7 @@
 
 #include "common/paths.h"
 #include "envs/humanoid_env.h"
+#include "tests/support/box_obj.h"
 
 namespace perch {
 namespace {
@@ -76,27 +77,7 @@ TEST(ChairGrid, AMeshOfTheSameBoxesReadsTheSameGrid) {
   const Chair boxes = Chair::Load(Chair::PresetPath("armchair"));
   const double yaw = 63.0 * M_PI / 180.0;
   const Eigen::Vector3d offset(0.7, -1.3, 0.0);
-  std::ostringstream obj;
-  int base = 1;
-  const Eigen::Matrix3d rz = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  double lowest = 1e9;
-  for (const ChairBox& b : boxes.boxes) {
-    lowest = std::min(lowest, b.min.z());
-    for (int k = 0; k < 8; ++k) {
-      const Eigen::Vector3d p((k & 1) ? b.max.x() : b.min.x(), (k & 2) ? b.max.y() : b.min.y(),
-                              (k & 4) ? b.max.z() : b.min.z());
-      const Eigen::Vector3d w = (rz * p + offset) / 0.01;
-      obj << "v " << w.x() << " " << w.y() << " " << w.z() << "\n";
-    }
-    const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
-                             {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
-    for (const auto& q : quads) {
-      obj << "f " << base + q[0] << " " << base + q[1] << " " << base + q[2] << "\n";
-      obj << "f " << base + q[0] << " " << base + q[2] << " " << base + q[3] << "\n";
-    }
-    base += 8;
-  }
-  std::ofstream(dir / "c.obj") << obj.str();
+  std::ofstream(dir / "c.obj") << BoxesAsObj(boxes, yaw, offset, 0.01, false);
   std::ofstream(dir / "c.json")
       << Json{{"name", "c"}, {"mesh", "c.obj"}, {"scale", 0.01}, {"static", true}}.dump();
   const Chair mesh = Chair::Load((dir / "c.json").string());

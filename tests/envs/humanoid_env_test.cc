@@ -800,17 +800,21 @@ TEST(HumanoidEnv, RandomChairsDrawTheListedFilesAsWellAsGeneratedOnes) {
 // changes the motion, reproducibly for a seed.
 TEST(HumanoidEnv, RandomizedPhysicsAndNoisesChangeWhatTheyShould) {
   const EnvConfig base = PdConfig();
-  // Held by the same PD targets for 1 s: a heavier humanoid sags lower.
-  auto settle = [](const EnvConfig& c, double* scale) {
-    HumanoidChairEnv env(c);
-    std::vector<float> obs(env.spec().obs_dim), act(21);
+  // An episode (its scales drawn) restarted standing 2 m from the chair, act = hold that pose.
+  auto stand = [](HumanoidChairEnv& env, std::vector<float>& obs, std::vector<float>& act) {
     env.Seed(1);
     env.Reset(obs.data());
-    *scale = env.world().mass_scale();
     HumanoidState s = StandingPose(env.model(), 0.002);
     s.root_pos.x() = 2.0;
     env.ResetToState(s, obs.data());
     env.HoldPoseAction(s.q.data(), act.data());
+  };
+  // Held by the same PD targets for 1 s: a heavier humanoid sags lower.
+  auto settle = [&stand](const EnvConfig& c, double* scale) {
+    HumanoidChairEnv env(c);
+    std::vector<float> obs(env.spec().obs_dim), act(21);
+    stand(env, obs, act);
+    *scale = env.world().mass_scale();
     for (int t = 0; t < 60; ++t) env.Step(act.data(), obs.data());
     return env.humanoid_state().root_pos.z();
   };
@@ -823,15 +827,10 @@ TEST(HumanoidEnv, RandomizedPhysicsAndNoisesChangeWhatTheyShould) {
   EXPECT_LT(z2, z1 - 1e-3) << "light " << z1 << " heavy " << z2;
   // The same push that topples it slides its foot further on a slippery floor (measured 0.07 m
   // against 0.14 m).
-  auto slide = [](const EnvConfig& c) {
+  auto slide = [&stand](const EnvConfig& c) {
     HumanoidChairEnv env(c);
     std::vector<float> obs(env.spec().obs_dim), act(21);
-    env.Seed(1);
-    env.Reset(obs.data());
-    HumanoidState s = StandingPose(env.model(), 0.002);
-    s.root_pos.x() = 2.0;
-    env.ResetToState(s, obs.data());
-    env.HoldPoseAction(s.q.data(), act.data());
+    stand(env, obs, act);
     for (int t = 0; t < 10; ++t) env.Step(act.data(), obs.data());
     // The feet: on a grippy floor they stay where they stood while the body sways.
     const int foot = env.model().foot_bodies()[0];

@@ -355,6 +355,27 @@ TEST(DropTrailingInputs, ActsAsTheSourceWithTheDroppedInputsAtTheirMean) {
   EXPECT_THROW(DropTrailingInputs(w, 60, "t"), ConfigError);
 }
 
+// `wide` (more inputs) acts and values as `w` on observations of its size, whatever the extra
+// inputs hold: `k` action entries compared, mean actions, 5 random observations.
+void ExpectSameActionsAndValues(const proto::ModelWeights& w, const proto::ModelWeights& wide,
+                                int k, Rng& rng) {
+  PolicyRunner src(PolicyConfigFromShape(w.shape(), "w"), NormalizerConfig());
+  PolicyRunner dst(PolicyConfigFromShape(wide.shape(), "d"), NormalizerConfig());
+  src.LoadWeights(w);
+  dst.LoadWeights(wide);
+  src.set_update_obs_stats(false);
+  dst.set_update_obs_stats(false);
+  const int n = wide.shape().obs_dim();
+  for (int trial = 0; trial < 5; ++trial) {
+    std::vector<float> x(n), a(k), b(k);
+    for (float& v : x) v = static_cast<float>(rng.Normal() * 2.0);
+    const auto os = src.Act(x.data(), rng, true, nullptr, a.data());
+    const auto od = dst.Act(x.data(), rng, true, nullptr, b.data());
+    for (int i = 0; i < k; ++i) EXPECT_NEAR(a[i], b[i], 1e-5) << i;
+    EXPECT_NEAR(os.value, od.value, 1e-5);
+  }
+}
+
 // The meta that observes its active subtask (57 + 5 inputs) starts from one that did not (57): the
 // same actions and value whatever the new inputs hold, until training moves their weights.
 TEST(AppendZeroInputs, ActsAsTheSourceWhateverTheNewInputsHold) {
@@ -367,22 +388,8 @@ TEST(AppendZeroInputs, ActsAsTheSourceWhateverTheNewInputsHold) {
   EXPECT_EQ(wide.obs_stats().mean(60), 0.0);
   EXPECT_EQ(wide.obs_stats().var(60), 1.0);
   EXPECT_EQ(wide.shape().num_choices(), w.shape().num_choices());
-  PolicyRunner src(PolicyConfigFromShape(w.shape(), "w"), NormalizerConfig());
-  PolicyRunner dst(PolicyConfigFromShape(wide.shape(), "d"), NormalizerConfig());
-  src.LoadWeights(w);
-  dst.LoadWeights(wide);
-  src.set_update_obs_stats(false);
-  dst.set_update_obs_stats(false);
   // A meta's action: the switch class, then act_dim continuous values.
-  const int k = 1 + PolicyConfigFromShape(w.shape(), "w").act_dim;
-  for (int trial = 0; trial < 5; ++trial) {
-    std::vector<float> x(62), a(k), b(k);
-    for (float& v : x) v = static_cast<float>(rng.Normal() * 2.0);
-    const auto os = src.Act(x.data(), rng, true, nullptr, a.data());
-    const auto od = dst.Act(x.data(), rng, true, nullptr, b.data());
-    for (int i = 0; i < k; ++i) EXPECT_NEAR(a[i], b[i], 1e-5) << i;
-    EXPECT_NEAR(os.value, od.value, 1e-5);
-  }
+  ExpectSameActionsAndValues(w, wide, 1 + PolicyConfigFromShape(w.shape(), "w").act_dim, rng);
   EXPECT_THROW(AppendZeroInputs(w, 57, "t"), ConfigError);
   EXPECT_THROW(AppendZeroInputs(w, 40, "t"), ConfigError);
 }
@@ -396,21 +403,7 @@ TEST(AppendZeroInputs, AGaussianSubtaskActsAsTheSourceWhateverTheNewInputsHold) 
   const proto::ModelWeights wide = AppendZeroInputs(w, 82, "test");
   EXPECT_EQ(wide.shape().obs_dim(), 82);
   EXPECT_EQ(wide.shape().kind(), "gaussian");
-  PolicyRunner src(PolicyConfigFromShape(w.shape(), "w"), NormalizerConfig());
-  PolicyRunner dst(PolicyConfigFromShape(wide.shape(), "d"), NormalizerConfig());
-  src.LoadWeights(w);
-  dst.LoadWeights(wide);
-  src.set_update_obs_stats(false);
-  dst.set_update_obs_stats(false);
-  const int k = PolicyConfigFromShape(w.shape(), "w").act_dim;
-  for (int trial = 0; trial < 5; ++trial) {
-    std::vector<float> x(82), a(k), b(k);
-    for (float& v : x) v = static_cast<float>(rng.Normal() * 2.0);
-    const auto os = src.Act(x.data(), rng, true, nullptr, a.data());
-    const auto od = dst.Act(x.data(), rng, true, nullptr, b.data());
-    for (int i = 0; i < k; ++i) EXPECT_NEAR(a[i], b[i], 1e-5) << i;
-    EXPECT_NEAR(os.value, od.value, 1e-5);
-  }
+  ExpectSameActionsAndValues(w, wide, PolicyConfigFromShape(w.shape(), "w").act_dim, rng);
 }
 
 }  // namespace
