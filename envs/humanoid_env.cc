@@ -283,7 +283,10 @@ void HumanoidChairEnv::UpdateChairGrid() {
 void HumanoidChairEnv::Reset(float* obs) {
   // The coin is only tossed when random chairs are on, so other runs draw as before.
   if (chair_ && config_.chair_random.prob > 0) {
-    if (!base_chair_) base_chair_ = std::make_unique<Chair>(*chair_);
+    if (!base_chair_) {
+      base_chair_ = std::make_unique<Chair>(*chair_);
+      base_chair_grid_ = ChairHeightGrid(*base_chair_, config_.obs.chair_grid_spacing);
+    }
     if (rng_.Uniform(0.0, 1.0) < config_.chair_random.prob) {
       // The second coin and the file's draw only when files are given, so runs without them
       // draw as before.
@@ -292,18 +295,22 @@ void HumanoidChairEnv::Reset(float* obs) {
         if (file_chairs_.empty()) {
           for (const std::string& f : files) {
             file_chairs_.push_back(Chair::Load(EnvConfig::ChairFilePath(f)));
+            file_chair_grids_.push_back(
+                ChairHeightGrid(file_chairs_.back(), config_.obs.chair_grid_spacing));
           }
         }
         const int k = std::min(static_cast<int>(rng_.Uniform(0.0, 1.0) * file_chairs_.size()),
                                static_cast<int>(file_chairs_.size()) - 1);
         chair_ = std::make_unique<Chair>(file_chairs_[k]);
+        chair_grid_ = file_chair_grids_[k];
       } else {
         chair_ = std::make_unique<Chair>(RandomChair(config_.chair_random, rng_));
+        UpdateChairGrid();  // boxes: cheap
       }
     } else {
       chair_ = std::make_unique<Chair>(*base_chair_);
+      chair_grid_ = base_chair_grid_;
     }
-    UpdateChairGrid();
     world_->SetChair(chair_.get());
   }
   // Per-episode physics scales (env.randomize), drawn only when a range is set.

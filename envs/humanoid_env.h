@@ -151,7 +151,11 @@ class HumanoidChairEnv : public Env {
   std::unique_ptr<Chair> base_chair_;  // env.chair, when chair_random replaces it
   std::vector<Chair> file_chairs_;     // chair_random.files, loaded at the first draw
   // The chair's height grid (proprio_chair_shape), chair frame, relative to the seat target [m].
+  // Those of the base and file chairs are kept: a mesh chair's grid costs a pass over its
+  // triangles per point, too much for every reset.
   std::array<float, kChairGridDim> chair_grid_{};
+  std::array<float, kChairGridDim> base_chair_grid_{};
+  std::vector<std::array<float, kChairGridDim>> file_chair_grids_;
   std::unique_ptr<World> world_;
   std::unique_ptr<Task> task_;
   EnvSpec spec_;

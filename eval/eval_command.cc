@@ -151,6 +151,7 @@ Json EvaluateMetaOnChair(EvalCommand& o, const TaskEnvConfig& on_chair) {
   mo.threads = o.threads;
   mo.first_trial = o.first_trial;
   mo.policy_lookahead = la;
+  mo.perturb = o.eval.perturb;
   if (o.record_routes && (o.records.empty() || la.lookahead_straight_s.empty())) {
     throw ConfigError(
         "--record-routes: needs --records and a lookahead with straight-on starts "
@@ -446,7 +447,7 @@ void RunEvalCommand(EvalCommand& o) {
   const auto no_perturbation = [&](const std::string& task) {
     if (o.eval.perturb.any()) {
       throw ConfigError("--push, --obs-noise, --act-noise, --restore: not yet for --task " + task +
-                        " (the subtasks' evaluations take them)");
+                        " (the subtasks' and sit_chair's evaluations take them)");
     }
   };
   if (o.cfg.task == "chain") {
@@ -461,7 +462,6 @@ void RunEvalCommand(EvalCommand& o) {
     throw ConfigError("--model: required (but for --task chain and --planner)");
   }
   const TaskEnvConfig config = ResolveConfig(o.cfg, o.model);
-  if (config.env.task == "sit_chair") no_perturbation("sit_chair");
   if (o.planner && config.env.task != "sit_chair") {
     throw ConfigError("--planner: only for the sit_chair task, the config's is \"" +
                       config.env.task + "\"");

@@ -258,8 +258,11 @@ void SubtaskPolicies::Begin(int id, const HumanoidChairEnv& env) {
 }
 
 void SubtaskPolicies::Act(int id, const HumanoidChairEnv& env, Rng& rng, bool deterministic,
-                          float* action) {
+                          float* action, const std::pair<double, Rng*>* obs_noise) {
   WriteObservation(id, env, /*running=*/true);
+  if (obs_noise != nullptr && obs_noise->first > 0.0) {
+    for (float& x : obs_) x += static_cast<float>(obs_noise->second->Normal(0.0, obs_noise->first));
+  }
   runners_[id]->Act(obs_.data(), rng, deterministic, nullptr, action);
 }
 

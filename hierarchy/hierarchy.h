@@ -11,6 +11,7 @@
 #include <array>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "common/json_util.h"
@@ -163,7 +164,10 @@ class SubtaskPolicies {
   // Subtask `id` becomes active now (a heading-goal turn starts its clip clock).
   void Begin(int id, const HumanoidChairEnv& env);
   // The action of subtask `id` on the env's current state (its own observation and normaliser).
-  void Act(int id, const HumanoidChairEnv& env, Rng& rng, bool deterministic, float* action);
+  // With `obs_noise` (an evaluation's perturbation, perch eval --obs-noise), Gaussian noise of
+  // obs_noise->first std drawn from *obs_noise->second on every entry of what the policy sees.
+  void Act(int id, const HumanoidChairEnv& env, Rng& rng, bool deterministic, float* action,
+           const std::pair<double, Rng*>* obs_noise = nullptr);
   // Subtask `id`'s own critic on the env's current state, as if it began now (a heading-goal
   // turn's clock at 0): how well its training expects it to do from here, in its value units.
   float Value(int id, const HumanoidChairEnv& env);

@@ -62,6 +62,34 @@ MetaEnv::~MetaEnv() = default;
 void MetaEnv::Seed(uint64_t seed) {
   env_->Seed(seed);
   rng_.Seed(seed ^ kSubtaskRngSalt);
+  perturb_rng_.Seed(seed ^ 0x5eed0f9e57b0a710ULL);  // as PerturbedEnv's
+}
+
+void MetaEnv::SetPerturbation(const Perturbation& p, int horizon_steps) {
+  perturb_ = p;
+  perturb_horizon_ = std::max(1, horizon_steps);
+}
+
+void MetaEnv::Perturb() {
+  const int t = episode_.control_steps;
+  if (t == restore_step_) RestoreState(SaveState());
+  if (t == push_step_) {
+    const double angle = perturb_rng_.Uniform(-M_PI, M_PI);
+    push_force_ = perturb_.push_n * Eigen::Vector3d(std::cos(angle), std::sin(angle), 0.0);
+    push_left_ =
+        std::max(1, static_cast<int>(std::lround(perturb_.push_s / env_->spec().control_dt)));
+  }
+  if (push_left_ > 0) {
+    env_->StartPush(push_force_, 1);  // this control step
+    --push_left_;
+  }
+}
+
+void MetaEnv::AddObsNoise(float* obs) {
+  if (perturb_.obs_noise <= 0.0) return;
+  for (int i = 0; i < spec_.obs_dim; ++i) {
+    obs[i] += static_cast<float>(perturb_rng_.Normal(0.0, perturb_.obs_noise));
+  }
 }
 
 std::vector<std::string> MetaEnv::frozen_policy_names() const {
@@ -113,7 +141,13 @@ void MetaEnv::Reset(float* obs) {
   episode_.spawn_theta = task_->spawn_theta();
   active_steps_ = 0;
   blend_left_ = 0;
+  push_left_ = 0;
+  push_step_ =
+      perturb_.push_n > 0.0 ? static_cast<int>(perturb_rng_.UniformInt(perturb_horizon_)) : -1;
+  restore_step_ =
+      perturb_.restore ? static_cast<int>(perturb_rng_.UniformInt(perturb_horizon_)) : -1;
   WriteObservation(obs);
+  AddObsNoise(obs);
 }
 
 void MetaEnv::WriteObservation(float* obs) const {
@@ -172,16 +206,24 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
       if (on_subtask_begin) on_subtask_begin(*env_, sub);
     }
     task_->set_active(sub);
-    policies_->Act(sub, *env_, rng_, !meta_.subtask_stochastic, action_.data());
+    if (perturb_.any()) Perturb();
+    const std::pair<double, Rng*> obs_noise{perturb_.obs_noise, &perturb_rng_};
+    const auto* noise = perturb_.obs_noise > 0.0 ? &obs_noise : nullptr;
+    policies_->Act(sub, *env_, rng_, !meta_.subtask_stochastic, action_.data(), noise);
     if (blend_left_ > 0) {
       // The previous subtask acts on its own clock, as if it had kept running.
-      policies_->Act(blend_from_, *env_, rng_, !meta_.subtask_stochastic, blend_action_.data());
+      policies_->Act(blend_from_, *env_, rng_, !meta_.subtask_stochastic, blend_action_.data(),
+                     noise);
       const float w = static_cast<float>(meta_.blend_steps - blend_left_ + 1) /
                       static_cast<float>(meta_.blend_steps + 1);
       for (size_t i = 0; i < action_.size(); ++i) {
         action_[i] = w * action_[i] + (1.0f - w) * blend_action_[i];
       }
       --blend_left_;
+    }
+    if (perturb_.act_noise > 0.0) {
+      for (float& a : action_)
+        a += static_cast<float>(perturb_rng_.Normal(0.0, perturb_.act_noise));
     }
     const StepResult r = env_->Step(action_.data(), inner_obs_.data());
     ++episode_.control_steps;
@@ -216,6 +258,7 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
   out.truncated = trunc;
   episode_.fell = term;
   WriteObservation(obs);
+  AddObsNoise(obs);
   return out;
 }
 

@@ -19,6 +19,7 @@
 #include "common/rng.h"
 #include "envs/humanoid_env.h"
 #include "hierarchy/hierarchy.h"
+#include "tasks/perturbation.h"
 #include "tasks/task_env.h"
 
 namespace perch {
@@ -95,9 +96,24 @@ class MetaEnv : public Env, public FrozenPolicyEnv {
   std::function<void(const HumanoidChairEnv&, const StepResult&, int active)> on_control_step;
   // Called when a subtask (re)starts, before its first action (start-state banks of hand-overs).
   std::function<void(const HumanoidChairEnv&, int sub)> on_subtask_begin;
+  // An evaluation's perturbations (perch eval --task sit_chair --push, --obs-noise, --act-noise,
+  // --restore; issue 49), from the next Reset on: each episode gets its push and restore at
+  // control steps drawn uniformly in [0, horizon_steps), the noises on what the meta and the
+  // subtasks see and on the subtasks' actions, all from an RNG of their own seeded with the
+  // episode, so its other draws are the unperturbed episode's. A push is applied step by step
+  // from here, so it lasts across the lookahead's restores. Perturbation(): none.
+  void SetPerturbation(const Perturbation& p, int horizon_steps);
 
  private:
   void WriteObservation(float* obs) const;
+  void Perturb();                // before a control step: the push and the restore
+  void AddObsNoise(float* obs);  // the meta's observation
+  Perturbation perturb_;
+  int perturb_horizon_ = 1;  // [control steps]
+  Rng perturb_rng_;
+  int push_step_ = -1, restore_step_ = -1;                // this episode's [control step]; -1: none
+  int push_left_ = 0;                                     // control steps the push still lasts
+  Eigen::Vector3d push_force_ = Eigen::Vector3d::Zero();  // [N], world frame
   TaskEnvConfig config_;
   SitChairTaskConfig task_config_;
   MetaConfig meta_;

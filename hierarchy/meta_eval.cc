@@ -91,8 +91,28 @@ TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int tri
       sit_starts.back().set_episode(static_cast<uint64_t>(trial));
     };
   }
+  int unperturbed = -1;
+  if (o.perturb.any()) {
+    // The same trial without the perturbations first: its outcome for the flip rate, and the span
+    // its outcome was decided in (to its success, else to its end: the trial goes on seated
+    // after a success) the horizon the perturbations' moments are drawn in. Hooks see only the
+    // perturbed run.
+    auto on_step = std::move(env.on_control_step);
+    auto on_begin = std::move(env.on_subtask_begin);
+    env.on_control_step = nullptr;
+    env.on_subtask_begin = nullptr;
+    env.SetPerturbation(Perturbation(), 1);
+    MetaDriver plain(&env, &d, o);
+    RunEpisode(&env, trial, o.seed, {env.spec().max_episode_steps, true}, &plain);
+    const MetaEpisode& u = env.episode();
+    unperturbed = u.success_step >= 0 ? 1 : 0;
+    env.SetPerturbation(o.perturb, u.success_step >= 0 ? u.success_step : u.control_steps);
+    env.on_control_step = std::move(on_step);
+    env.on_subtask_begin = std::move(on_begin);
+  }
   MetaDriver driver(&env, &d, o);
   RunEpisode(&env, trial, o.seed, {env.spec().max_episode_steps, true}, &driver);
+  env.SetPerturbation(Perturbation(), 1);
   std::vector<float> start_obs = std::move(driver.start_obs);
   env.on_control_step = nullptr;
   env.on_subtask_begin = nullptr;
@@ -111,6 +131,7 @@ TrialResult RunTrial(MetaEnv& env, Decider& d, const MetaEvalOptions& o, int tri
   rec.sequence = e.sequence;
   rec.begin_value = e.begin_value;
   rec.build = PerchVersion();
+  rec.unperturbed_success = unperturbed;
   out.sit_starts = std::move(sit_starts);
   if (d.lookahead != nullptr) {
     const LookaheadPlanner::Stats& st = d.lookahead->stats();
@@ -220,6 +241,7 @@ Json MetaTrialRecord::ToJson() const {
          {"sequence", sequence},
          {"begin_value", begin_value}};
   if (!build.empty()) j["build"] = build;
+  if (unperturbed_success >= 0) j["unperturbed_success"] = unperturbed_success == 1;
   if (!start_obs.empty()) j["start_obs"] = start_obs;
   if (!routes.empty()) {
     Json rs = Json::array();
@@ -261,6 +283,11 @@ MetaTrialRecord MetaTrialRecord::FromJson(const Json& j, const std::string& wher
   GetRequired(j, "sequence", r.sequence, where);
   GetRequired(j, "begin_value", r.begin_value, where);
   GetOptional(j, "build", r.build, where);
+  if (j.contains("unperturbed_success")) {
+    bool u = false;
+    GetRequired(j, "unperturbed_success", u, where);
+    r.unperturbed_success = u ? 1 : 0;
+  }
   GetOptional(j, "start_obs", r.start_obs, where);
   if (j.contains("routes")) {
     const Json& rs = j.at("routes");
@@ -322,6 +349,8 @@ Json MetaEvalHeader(const TaskEnvConfig& config, const proto::ModelWeights& meta
   if (!planned && lookahead) {
     h.update(LookaheadJson(o.policy_lookahead));
   }
+  // Only when on, so that the records of unperturbed evaluations keep their headers.
+  if (o.perturb.any()) h["perturbation"] = o.perturb.ToJson();
   Json subs = Json::object();
   for (const FrozenPolicyData& f : frozen) subs[f.name] = Sha256Hex(f.model);
   h["frozen_sha256"] = subs;
@@ -398,8 +427,8 @@ Json AggregateMeta(const Json& header, std::vector<MetaTrialRecord> results) {
     sides[side] = {{"trials", c[1]}, {"success_rate", c[1] ? double(c[0]) / c[1] : 0.0}};
   }
   Json j = Json::object();
-  std::vector<std::string> keys = {"task",       "zone",    "chair",   "seed",
-                                   "stochastic", "choices", "decider", "planner"};
+  std::vector<std::string> keys = {"task",    "zone",    "chair",   "seed",        "stochastic",
+                                   "choices", "decider", "planner", "perturbation"};
   keys.insert(keys.end(), LookaheadFieldNames().begin(), LookaheadFieldNames().end());
   for (const std::string& k : keys) {
     if (header.contains(k)) j[k] = header[k];
@@ -424,6 +453,21 @@ Json AggregateMeta(const Json& header, std::vector<MetaTrialRecord> results) {
                 // builds (the header cannot see a code change).
                 {"builds", builds}});
   j["handover_values"] = HandoverValues(results);
+  if (header.contains("perturbation")) {
+    std::vector<bool> plain, perturbed;
+    for (const MetaTrialRecord& r : results) {
+      if (r.unperturbed_success < 0) {
+        throw ConfigError("eval: trial " + std::to_string(r.trial) +
+                          " of a perturbed evaluation has no unperturbed outcome");
+      }
+      plain.push_back(r.unperturbed_success == 1);
+      perturbed.push_back(r.success);
+    }
+    int u = 0;
+    for (bool b : plain) u += b;
+    j["unperturbed_success_rate"] = u / n;
+    j.update(FlipRate(plain, perturbed));
+  }
   if (header.value("looks_ahead", false)) {
     // How much looking ahead was done and changed, and whether the simulator was exact (the
     // outcome is the one the last look ahead predicted).

@@ -17,6 +17,7 @@
 #include "common/proto/model.pb.h"
 #include "envs/pose_frame.h"
 #include "hierarchy/chain_plan.h"
+#include "tasks/perturbation.h"
 #include "tasks/task_env.h"
 
 namespace perch {
@@ -61,6 +62,9 @@ struct MetaTrialRecord {
   };
   std::vector<float> start_obs;
   std::vector<Route> routes;
+  // With MetaEvalOptions::perturb: the same trial's outcome without the perturbations (0 / 1;
+  // -1: not a perturbed evaluation).
+  int unperturbed_success = -1;
 
   Json ToJson() const;
   // ConfigError naming `where` and the field when a field is missing or of the wrong type.
@@ -102,6 +106,12 @@ struct MetaEvalOptions {
   std::vector<MetaTrialRecord> done;
   // Called with each trial's record as it finishes (from the threads, serialised).
   std::function<void(const MetaTrialRecord&)> on_record;
+  // Perturbations (issue 49; perch eval --push, --obs-noise, --act-noise, --restore): each trial
+  // runs first without them (the span its outcome was decided in, to its success or else its
+  // end, is the horizon their moments are drawn in, as a subtask's judged span is), then with them;
+  // the record is the perturbed run's, with the unperturbed outcome beside it, and the result gains
+  // flip_rate (MetaEnv::SetPerturbation).
+  Perturbation perturb;
 };
 
 // The control-step frames of one trial, labelled with the acting subtask.

@@ -127,6 +127,15 @@ const FieldTable<StageSelect>& StageSelectFields() {
               [](const StageSelect& s, Json& j) {
                 if (s.milestones) j["milestones"] = true;
               })
+          .Custom(
+              "include_init", "the policy the run started from (cluster.init_from) competes too",
+              [](const Json& j, StageSelect& s, const std::string& ctx) {
+                GetOptional(j, "include_init", s.include_init, ctx);
+              },
+              // Written only when on, as milestones.
+              [](const StageSelect& s, Json& j) {
+                if (s.include_init) j["include_init"] = true;
+              })
           .Add("episodes", &StageSelect::episodes, "episodes per candidate",
                Satisfies<int>([](const int& v) { return v >= 1; }, "must be >= 1"))
           .Add("seed", &StageSelect::seed, "the selection seed (figures are reported on another)")
@@ -136,6 +145,9 @@ const FieldTable<StageSelect>& StageSelectFields() {
           .Rule([](const StageSelect& s, const std::string& ctx) {
             if (s.milestones && s.last_k < 1) {
               return ctx + ".milestones: needs last_k >= 1 (a selection by evaluation)";
+            }
+            if (s.include_init && s.last_k < 1) {
+              return ctx + ".include_init: needs last_k >= 1 (a selection by evaluation)";
             }
             return std::string();
           });

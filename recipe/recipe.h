@@ -21,10 +21,13 @@ namespace perch {
 // checkpoints (with `milestones`, also every milestone checkpoint the run kept: each
 // cluster.milestone_every updates, so the whole run is searched, not only its end) is evaluated
 // (perch eval, `episodes` episodes on the selection seed), the best by `metric` wins (ties: the
-// newer). last_k 0: the newest checkpoint, no evaluation.
+// newer). last_k 0: the newest checkpoint, no evaluation. With `include_init` the policy the run
+// started from (cluster.init_from) competes as the oldest candidate, "init": a fine-tune that does
+// not beat its input on the selection seed delivers its input.
 struct StageSelect {
   int last_k = 0;
   bool milestones = false;
+  bool include_init = false;
   int episodes = 100;                   // scaled by --scale (floor: min_episodes)
   uint64_t seed = 1;                    // the selection seed; reports use another (docs/recipe.md)
   std::string metric = "success_rate";  // a top-level number of perch eval's JSON

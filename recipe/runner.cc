@@ -163,10 +163,13 @@ class DirLock {
 };
 
 struct Live {
-  std::string phase;      // what the stage is doing now
-  int64_t samples = 0;    // train: samples so far
-  int64_t samples0 = -1;  // at this attempt's start (rate)
-  double t0 = 0.0;        // this attempt's start
+  std::string phase;    // what the stage is doing now
+  int64_t samples = 0;  // train: samples so far
+  // The first sample count this attempt read, and when: the rate counts from there, so a
+  // resumed run's earlier samples (or a missing metrics file read as 0) do not inflate it.
+  int64_t samples0 = -1;
+  double ts0 = 0.0;
+  double t0 = 0.0;  // this attempt's start
   std::atomic<bool> finished{false};
   std::atomic<int> code{0};  // 0 done, 1 failed, 130 stopped
 };
@@ -317,8 +320,8 @@ class Runner {
                 const std::string& stdout_path, Live* live, const std::string& run_dir,
                 int* status);
   void Train(const RecipeStage& s, Live* live, StageRecord* rec);
-  bool SelectCheckpoint(const RecipeStage& s, const std::vector<std::string>& cand, Live* live,
-                        std::string* chosen, Json* figures);
+  bool SelectCheckpoint(const RecipeStage& s, const std::vector<std::string>& cand,
+                        const std::string& init, Live* live, std::string* chosen, Json* figures);
   void Extend(const std::string& name);
   void Adopt();
   // Run()'s steps: every done stage's outputs still as recorded; the changed stages said (and
@@ -404,7 +407,10 @@ bool Runner::RunChild(const std::vector<std::string>& argv, const std::string& l
       const int64_t n = RunSamples(run_dir);
       std::lock_guard<std::mutex> g(mu_);
       live->samples = n;
-      if (live->samples0 < 0) live->samples0 = n;
+      if (live->samples0 < 0 && n > 0) {
+        live->samples0 = n;
+        live->ts0 = Now();
+      }
     }
     if (f_.stop && f_.stop->load()) {
       // perch train writes a final checkpoint on SIGTERM; give it time.
@@ -416,9 +422,20 @@ bool Runner::RunChild(const std::vector<std::string>& argv, const std::string& l
 
 // The delivered checkpoint of a finished run: each candidate evaluated on the selection seed
 // (cached in the stage's select/), the best by select.metric into *chosen, the table into
-// *figures. False when stopped.
-bool Runner::SelectCheckpoint(const RecipeStage& s, const std::vector<std::string>& cand,
-                              Live* live, std::string* chosen, Json* figures) {
+// *figures. `init` (select.include_init: the policy the run started from), when given, is the
+// oldest candidate, named "init". False when stopped.
+bool Runner::SelectCheckpoint(const RecipeStage& s, const std::vector<std::string>& checkpoints,
+                              const std::string& init, Live* live, std::string* chosen,
+                              Json* figures) {
+  std::vector<std::string> cand, names;
+  if (!init.empty()) {
+    cand.push_back(init);
+    names.push_back("init");
+  }
+  for (const std::string& c : checkpoints) {
+    cand.push_back(c);
+    names.push_back(fs::path(c).stem().string());
+  }
   const std::string sd = StageDir(s.name);
   const std::string log = sd + "/stage.log";
   std::error_code ec;
@@ -428,7 +445,7 @@ bool Runner::SelectCheckpoint(const RecipeStage& s, const std::vector<std::strin
   double best = 0;
   bool have = false;
   for (size_t i = 0; i < cand.size(); ++i) {
-    const std::string name = fs::path(cand[i]).stem().string();
+    const std::string& name = names[i];
     const std::string out = sd + "/select/" + name + ".json";
     Json result;
     if (fs::exists(out)) result = Json::parse(ReadFileBytes(out), nullptr, false);
@@ -567,12 +584,25 @@ void Runner::Train(const RecipeStage& s, Live* live, StageRecord* rec) {
   if (ck.empty()) throw std::runtime_error(run + ": the run left no checkpoint");
   const std::vector<std::string> cand = SelectionCandidates(ck, s.select);
   std::string chosen = ck.back();
+  // select.include_init: the policy the run started from competes too, so a fine-tune that does
+  // not beat its input on the selection seed delivers the input.
+  std::string init;
+  if (s.select.include_init) {
+    const Json c = LoadJsonFile(cfg_path);
+    if (c.contains("cluster") && c["cluster"].is_object()) {
+      init = c["cluster"].value("init_from", "");
+    }
+    if (init.empty()) {
+      throw ConfigError(s.name + ": select.include_init needs cluster.init_from in its config");
+    }
+  }
   Json figures{{"stop_reason", reason}};
-  if (s.select.last_k > 0 && !SelectCheckpoint(s, cand, live, &chosen, &figures)) {
+  if (s.select.last_k > 0 && !SelectCheckpoint(s, cand, init, live, &chosen, &figures)) {
     live->code = 130;
     return;
   }
-  figures["chosen"] = fs::path(chosen).filename().string();
+  figures["chosen"] =
+      !init.empty() && chosen == init ? "init" : fs::path(chosen).filename().string();
   if (rec->figures.contains("extended_from_samples")) {
     figures["extended_from_samples"] = rec->figures["extended_from_samples"];
   }
@@ -827,7 +857,8 @@ void Runner::Progress() {
       std::string line = "[recipe] " + s.name + " (" + s.kind + "): " + l.phase;
       double eta = std::max(0.0, s.est_wall_s - el);
       if (s.kind == "train" && s.max_samples > 0) {
-        const double rate = l.samples0 >= 0 && el > 5 ? (l.samples - l.samples0) / el : 0.0;
+        const double since = now - l.ts0;
+        const double rate = l.samples0 >= 0 && since > 5 ? (l.samples - l.samples0) / since : 0.0;
         line += ", " + Count(static_cast<double>(l.samples)) + " / " +
                 Count(static_cast<double>(s.max_samples)) + " samples (" +
                 std::to_string(std::min<int64_t>(100, 100 * l.samples / s.max_samples)) + "%)";
@@ -1220,9 +1251,12 @@ int Runner::Run() {
   if (f_.check) {
     int done = 0;
     for (const RecipeStage& s : r_.stages) done += state_.stages[s.name].state == "done";
+    std::string redone;
+    for (const std::string& n : redo) redone += (redone.empty() ? "" : ", ") + n;
     std::cerr << "perch recipe: " << r_.path << " OK: " << r_.stages.size() << " stages, " << done
               << " done in " << dir_ << "; would run " << r_.stages[from_].name << " .. "
-              << r_.stages[until_].name << (redo.empty() ? "" : " (redoing some: --force-from)")
+              << r_.stages[until_].name
+              << (redo.empty() ? "" : "; would redo " + redone + " (--force-from/--extend)")
               << "\n";
     return 0;
   }

@@ -11,6 +11,7 @@
 
 #include "common/npz.h"
 #include "common/rng.h"
+#include "envs/chair_grid.h"
 #include "envs/spawn.h"
 
 namespace perch {
@@ -773,15 +774,23 @@ TEST(HumanoidEnv, RandomChairsDrawTheListedFilesAsWellAsGeneratedOnes) {
   c.chair_random.prob = 1.0;
   c.chair_random.files = {"stool", "bench"};
   c.chair_random.files_prob = 0.6;
+  c.chair_random.prob = 0.8;  // the base chair's episodes too
+  c.obs_layout = ObsLayout::kProprioChairShape;
   HumanoidChairEnv env(c);
   std::vector<float> obs(env.spec().obs_dim);
   std::map<std::string, int> seen;
-  for (int seed = 0; seed < 30; ++seed) {
+  for (int seed = 0; seed < 40; ++seed) {
     env.Seed(seed);
     env.Reset(obs.data());
     ASSERT_NE(env.chair(), nullptr);
     EXPECT_EQ(env.world().chair(), env.chair());
     ++seen[env.chair()->name];
+    // The shape features are this episode's chair's (the base and file chairs' grids are kept
+    // from their first draw, a generated chair's computed at its reset).
+    const ChairGrid g = ChairHeightGrid(*env.chair(), c.obs.chair_grid_spacing);
+    for (int i = 0; i < kChairGridDim; ++i) {
+      ASSERT_FLOAT_EQ(obs[kObsShape + i], g[i]) << env.chair()->name << " seed " << seed;
+    }
     if (env.chair()->name == "stool") {
       EXPECT_NEAR(env.SeatTargetWorld().z(),
                   Chair::Load(Chair::PresetPath("stool")).seat_target.z(), 1e-9);
@@ -790,7 +799,8 @@ TEST(HumanoidEnv, RandomChairsDrawTheListedFilesAsWellAsGeneratedOnes) {
   EXPECT_GT(seen["stool"], 0);
   EXPECT_GT(seen["bench"], 0);
   EXPECT_GT(seen["random"], 0);
-  EXPECT_EQ(seen.size(), 3u);
+  EXPECT_GT(seen["authors"], 0);
+  EXPECT_EQ(seen.size(), 4u);
   EXPECT_NE(EnvConfigError({{"chair_random", {{"files_prob", 0.5}}}}).find("files_prob"),
             std::string::npos);
 }

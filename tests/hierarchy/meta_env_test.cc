@@ -743,6 +743,51 @@ TEST(MetaEval, TheMetaPolicyWithLookaheadIsExactAndNoWorseThanAlone) {
   EXPECT_GE(near["success_rate"].get<double>(), alone["success_rate"].get<double>());
 }
 
+// perch eval --task sit_chair --push / --obs-noise / --act-noise / --restore (issue 49): each
+// trial also runs unperturbed, and the result says how many outcomes the perturbation flipped.
+// No perturbation of size zero flips anything; a 3 kN shove on the pelvis for 0.1 s at a random
+// moment of every trial ends some that the policy alone completes; the records carry the
+// unperturbed outcome, so a resumed or merged perturbed evaluation gives the same figures.
+TEST(MetaEval, PerturbedTrialsReportTheirFlipRateAgainstTheSameTrialsUnperturbed) {
+  const DeliveredMeta d = LoadDeliveredMeta();
+  MetaEvalOptions o;
+  o.trials = 8;
+  o.seed = 21;
+  o.threads = 2;
+  const Json plain = EvaluateMeta(d.config, d.meta, d.frozen, o);
+  EXPECT_FALSE(plain.contains("flip_rate"));
+  EXPECT_FALSE(MetaEvalHeader(d.config, d.meta, d.frozen, o).contains("perturbation"));
+  // A restore alone: the trial goes on from the same state (Bullet's caches rebuilt), so most
+  // outcomes stay, and the unperturbed ones are the plain evaluation's.
+  o.perturb.restore = true;
+  const Json restored = EvaluateMeta(d.config, d.meta, d.frozen, o);
+  EXPECT_EQ(restored["unperturbed_success_rate"], plain["success_rate"]);
+  EXPECT_EQ(restored["perturbation"]["restore"], true);
+  ASSERT_TRUE(restored.contains("flip_ci95"));
+  EXPECT_LE(restored["flip_rate"].get<double>(), 0.5);
+  o.perturb = Perturbation();
+  o.perturb.push_n = 3000.0;
+  std::vector<MetaTrialRecord> records;
+  o.on_record = [&](const MetaTrialRecord& r) {
+    records.push_back(MetaTrialRecord::FromJson(Json::parse(r.ToJson().dump()), "line"));
+  };
+  const Json pushed = EvaluateMeta(d.config, d.meta, d.frozen, o);
+  EXPECT_EQ(pushed["unperturbed_success_rate"], plain["success_rate"]);
+  ASSERT_GT(plain["success_rate"].get<double>(), 0.0);
+  EXPECT_LT(pushed["success_rate"].get<double>(), plain["success_rate"].get<double>());
+  EXPECT_GT(pushed["flip_rate"].get<double>(), 0.0);
+  EXPECT_EQ(pushed["flips"].get<int>(),
+            static_cast<int>(std::lround(pushed["flip_rate"].get<double>() * 8)));
+  EXPECT_EQ(pushed["perturbation"]["push_n"], 3000.0);
+  // Records hold both outcomes and aggregate to the same figures.
+  ASSERT_EQ(records.size(), 8u);
+  for (const MetaTrialRecord& r : records) EXPECT_GE(r.unperturbed_success, 0);
+  ExpectSameResult(AggregateMeta(MetaEvalHeader(d.config, d.meta, d.frozen, o), records), pushed);
+  // A record without the unperturbed outcome cannot join a perturbed evaluation.
+  records[3].unperturbed_success = -1;
+  EXPECT_THROW(AggregateMeta(MetaEvalHeader(d.config, d.meta, d.frozen, o), records), ConfigError);
+}
+
 // --record-routes: each trial's record holds its start observation and the outcome of every
 // start route tried (the policy's own first), and the trial takes the best of them (only start
 // routes here, ranked by the sooner success), so its outcome is theirs.

@@ -165,6 +165,14 @@ TEST(Recipe, SelectionSearchesTheMilestonesWhenAsked) {
   EXPECT_NE(f, StageFingerprint(ScaledStage(RecipeFromJson(r, "r.json").stages[2], o), Json(), {}));
   r["stages"][2]["select"] = {{"milestones", true}};
   EXPECT_NE(ErrorOf(r).find(".milestones: needs last_k >= 1"), std::string::npos) << ErrorOf(r);
+  // include_init likewise: read, written only when on, and only with a selection by evaluation.
+  r["stages"][2]["select"] = {{"last_k", 3}, {"episodes", 10}, {"include_init", false}};
+  EXPECT_EQ(f, StageFingerprint(ScaledStage(RecipeFromJson(r, "r.json").stages[2], o), Json(), {}));
+  r["stages"][2]["select"]["include_init"] = true;
+  EXPECT_TRUE(RecipeFromJson(r, "r.json").stages[2].select.include_init);
+  EXPECT_NE(f, StageFingerprint(ScaledStage(RecipeFromJson(r, "r.json").stages[2], o), Json(), {}));
+  r["stages"][2]["select"] = {{"include_init", true}};
+  EXPECT_NE(ErrorOf(r).find(".include_init: needs last_k >= 1"), std::string::npos) << ErrorOf(r);
 }
 
 // Sharded evaluations: consecutive trials per shard, none twice, none left out; only an eval

@@ -183,12 +183,25 @@ for s in recipe["stages"]:
         assert path in log or path in cfg, (s["name"], a, b, path)
         checked += 1
 assert checked >= 40, checked
-# Training stages chose a checkpoint and delivered exactly it.
+# Training stages chose a checkpoint and delivered exactly it; with select.include_init the
+# policy the run started from was a candidate ("init", its result cached like the others), and
+# delivered when chosen.
+inits = 0
 for s in recipe["stages"]:
     if s["kind"] == "train":
         f = state["stages"][s["name"]]["figures"]
-        chosen = os.path.join(d, s["name"], "run", "checkpoints", f["chosen"])
+        if f["chosen"] == "init":
+            cfg = json.load(open(os.path.join(d, s["name"], "config.json")))
+            chosen = cfg["cluster"]["init_from"]
+        else:
+            chosen = os.path.join(d, s["name"], "run", "checkpoints", f["chosen"])
         assert open(chosen, "rb").read() == open(os.path.join(d, s["name"], "policy.bin"), "rb").read()
+        if s.get("select", {}).get("include_init"):
+            rows = [r["checkpoint"] for r in f["selection"]]
+            assert rows[0] == "init" and rows.count("init") == 1, (s["name"], rows)
+            assert os.path.isfile(os.path.join(d, s["name"], "select", "init.json")), s["name"]
+            inits += 1
+assert inits >= 1, "no stage of the recipe selects with include_init"
 print("B: %d stages done, %d references checked" % (len(names), checked))
 PY
 
