@@ -11,6 +11,7 @@
 #include "tasks/config_fields.h"
 #include "tasks/episode_loop.h"
 #include "tasks/imitation.h"
+#include "tasks/perturbation.h"
 #include "tasks/registry.h"
 #include "tasks/state_bank.h"
 #include "tasks/task_env.h"
@@ -261,7 +262,8 @@ void SubtaskPolicies::Act(int id, const HumanoidChairEnv& env, Rng& rng, bool de
                           float* action, const std::pair<double, Rng*>* obs_noise) {
   WriteObservation(id, env, /*running=*/true);
   if (obs_noise != nullptr && obs_noise->first > 0.0) {
-    for (float& x : obs_) x += static_cast<float>(obs_noise->second->Normal(0.0, obs_noise->first));
+    AddGaussianNoise(obs_.data(), static_cast<int>(obs_.size()), obs_noise->first,
+                     *obs_noise->second);
   }
   runners_[id]->Act(obs_.data(), rng, deterministic, nullptr, action);
 }

@@ -62,7 +62,7 @@ MetaEnv::~MetaEnv() = default;
 void MetaEnv::Seed(uint64_t seed) {
   env_->Seed(seed);
   rng_.Seed(seed ^ kSubtaskRngSalt);
-  perturb_rng_.Seed(seed ^ 0x5eed0f9e57b0a710ULL);  // as PerturbedEnv's
+  perturb_rng_.Seed(seed ^ kPerturbationRngSalt);
 }
 
 void MetaEnv::SetPerturbation(const Perturbation& p, int horizon_steps) {
@@ -86,9 +86,8 @@ void MetaEnv::Perturb() {
 }
 
 void MetaEnv::AddObsNoise(float* obs) {
-  if (perturb_.obs_noise <= 0.0) return;
-  for (int i = 0; i < spec_.obs_dim; ++i) {
-    obs[i] += static_cast<float>(perturb_rng_.Normal(0.0, perturb_.obs_noise));
+  if (perturb_.obs_noise > 0.0) {
+    AddGaussianNoise(obs, spec_.obs_dim, perturb_.obs_noise, perturb_rng_);
   }
 }
 
@@ -222,8 +221,8 @@ StepResult MetaEnv::Step(const float* action, float* obs) {
       --blend_left_;
     }
     if (perturb_.act_noise > 0.0) {
-      for (float& a : action_)
-        a += static_cast<float>(perturb_rng_.Normal(0.0, perturb_.act_noise));
+      AddGaussianNoise(action_.data(), static_cast<int>(action_.size()), perturb_.act_noise,
+                       perturb_rng_);
     }
     const StepResult r = env_->Step(action_.data(), inner_obs_.data());
     ++episode_.control_steps;

@@ -8,6 +8,10 @@
 
 namespace perch {
 
+void AddGaussianNoise(float* x, int n, double std, Rng& rng) {
+  for (int i = 0; i < n; ++i) x[i] += static_cast<float>(rng.Normal(0.0, std));
+}
+
 Json Perturbation::ToJson() const {
   return Json{{"push_n", push_n},
               {"push_s", push_s},
@@ -21,7 +25,7 @@ PerturbedEnv::PerturbedEnv(HumanoidChairEnv* env, const Perturbation& p, int hor
 
 void PerturbedEnv::Seed(uint64_t seed) {
   env_->Seed(seed);
-  rng_.Seed(seed ^ 0x5eed0f9e57b0a710ULL);  // its own stream (Rng::Seed scrambles)
+  rng_.Seed(seed ^ kPerturbationRngSalt);
 }
 
 void PerturbedEnv::Reset(float* obs) {
@@ -41,9 +45,8 @@ StepResult PerturbedEnv::Step(const float* action, float* obs) {
   }
   const float* a = action;
   if (p_.act_noise > 0.0) {
-    for (size_t i = 0; i < action_.size(); ++i) {
-      action_[i] = action[i] + static_cast<float>(rng_.Normal(0.0, p_.act_noise));
-    }
+    std::copy(action, action + action_.size(), action_.begin());
+    AddGaussianNoise(action_.data(), static_cast<int>(action_.size()), p_.act_noise, rng_);
     a = action_.data();
   }
   const StepResult r = env_->Step(a, obs);
@@ -53,9 +56,7 @@ StepResult PerturbedEnv::Step(const float* action, float* obs) {
 }
 
 void PerturbedEnv::AddObsNoise(float* obs) {
-  if (p_.obs_noise <= 0.0) return;
-  for (int i = 0; i < spec().obs_dim; ++i)
-    obs[i] += static_cast<float>(rng_.Normal(0.0, p_.obs_noise));
+  if (p_.obs_noise > 0.0) AddGaussianNoise(obs, spec().obs_dim, p_.obs_noise, rng_);
 }
 
 Json FlipRate(const std::vector<bool>& unperturbed, const std::vector<bool>& perturbed) {

@@ -3,6 +3,7 @@
 // be run with and without them and the pair differs only by the perturbation (flip_rate).
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include "common/json_util.h"
@@ -10,6 +11,13 @@
 #include "envs/humanoid_env.h"
 
 namespace perch {
+
+// The perturbations' RNG is seeded with the episode's seed XOR this, a stream of its own
+// (Rng::Seed scrambles), so the episode's other draws are the unperturbed episode's.
+constexpr uint64_t kPerturbationRngSalt = 0x5eed0f9e57b0a710ULL;
+
+// x[0 .. n) += Gaussian noise of std `std`, drawn in order from `rng`.
+void AddGaussianNoise(float* x, int n, double std, Rng& rng);
 
 struct Perturbation {
   double push_n = 0.0;     // [N] a horizontal force on the pelvis, in a random direction ...
