@@ -1253,9 +1253,17 @@ int Runner::Run() {
     for (const RecipeStage& s : r_.stages) done += state_.stages[s.name].state == "done";
     std::string redone;
     for (const std::string& n : redo) redone += (redone.empty() ? "" : ", ") + n;
+    // What a run would do: the stages of the range that are not done (done ones are skipped).
+    std::vector<std::string> todo;
+    for (int i = from_; i <= until_; ++i) {
+      if (state_.stages[r_.stages[i].name].state != "done") todo.push_back(r_.stages[i].name);
+    }
+    const std::string would =
+        todo.empty() ? "nothing to run"
+                     : "would run " + std::to_string(todo.size()) + " stage(s), " + todo.front() +
+                           (todo.size() > 1 ? " .. " + todo.back() : "");
     std::cerr << "perch recipe: " << r_.path << " OK: " << r_.stages.size() << " stages, " << done
-              << " done in " << dir_ << "; would run " << r_.stages[from_].name << " .. "
-              << r_.stages[until_].name
+              << " done in " << dir_ << "; " << would
               << (redo.empty() ? "" : "; would redo " + redone + " (--force-from/--extend)")
               << "\n";
     return 0;

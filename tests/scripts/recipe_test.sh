@@ -137,7 +137,13 @@ wait_for "$B" "d['stages'].get('walk2',{}).get('state')=='running'" 120
 kill -9 $pid
 wait $pid 2>/dev/null || true
 sleep 1
+# --check-config names what a run would do: from the interrupted stage on, not the done ones.
+"$bin" "${argsB[@]}" --check-config > "$tmp/check1.log" 2>&1 || fail "B: --check-config after the kill"
+grep -q "would run [0-9]* stage(s), walk2 \.\. " "$tmp/check1.log" ||
+  fail "B: --check-config after the kill: $(cat "$tmp/check1.log")"
 "$bin" "${argsB[@]}" >> "$tmp/b.log" 2>&1 || fail "B: the resumed recipe failed: $(tail -30 "$tmp/b.log")"
+"$bin" "${argsB[@]}" --check-config > "$tmp/check2.log" 2>&1 || fail "B: --check-config when done"
+grep -q "nothing to run" "$tmp/check2.log" || fail "B: --check-config when done: $(cat "$tmp/check2.log")"
 "$bin" recipe status --dir "$B" --json > "$tmp/status.json"
 python3 - "$B" "$tmp/status.json" "$src/recipes/sit_chair.json" << 'PY' || fail "B: checks"
 import hashlib, json, os, re, sys
