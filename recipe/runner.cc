@@ -1258,10 +1258,10 @@ int Runner::Run() {
     for (int i = from_; i <= until_; ++i) {
       if (state_.stages[r_.stages[i].name].state != "done") todo.push_back(r_.stages[i].name);
     }
-    const std::string would =
-        todo.empty() ? "nothing to run"
-                     : "would run " + std::to_string(todo.size()) + " stage(s), " + todo.front() +
-                           (todo.size() > 1 ? " .. " + todo.back() : "");
+    const std::string would = todo.empty() ? "nothing to run"
+                                           : "would run " + std::to_string(todo.size()) +
+                                                 " stage(s), " + todo.front() +
+                                                 (todo.size() > 1 ? " .. " + todo.back() : "");
     std::cerr << "perch recipe: " << r_.path << " OK: " << r_.stages.size() << " stages, " << done
               << " done in " << dir_ << "; " << would
               << (redo.empty() ? "" : "; would redo " + redone + " (--force-from/--extend)")
